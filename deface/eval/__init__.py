@@ -1,0 +1,1 @@
+"""Evaluation: metrics (PSNR, SSIM, LPIPS), the pairs protocol, the synthetic shadow benchmark."""

@@ -1,0 +1,1 @@
+"""Outputs: UV textures, OBJ/MTL, params.json/npz, renders and masks."""

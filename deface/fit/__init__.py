@@ -1,0 +1,1 @@
+"""Fitting: configs and presets, the three stages, and the pipeline that composes them."""

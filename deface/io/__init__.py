@@ -1,0 +1,1 @@
+"""Loading inputs: images (EXIF orientation, sRGB <-> linear), folders, video frames."""

@@ -1,0 +1,1 @@
+"""Facial landmarks: MediaPipe Face Mesh detection and tracking, face choice, model correspondences."""
