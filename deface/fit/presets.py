@@ -1,0 +1,117 @@
+"""Named presets: each a documented FitConfig. The CLI's ``--preset`` picks one; switches override it.
+
+- ``paper``: Table 6 of the paper (w0..w7 = 2e3, 1e-3, 1.5e2, 0.5, 25, 2e3, 2.0, 1.0; iter_0 = 100,
+  stage-2/3 iterations 400/200; eps = 0.17; n = 5; gamma_i = 2(i/n) - 1).
+- ``code-images`` / ``code-video`` / ``code-portrait``: the authors' code configs (VoxCeleb2 images,
+  VoxCeleb2 videos, portrait-shadow set): L = 1.5 / 1.5 / 1.0 with gamma_i = -L + 2L(i+1)/n, their eps,
+  w1, w2, w4, SH learning rate and stage-2 length (``../shared/docs/method-facts.md``).
+- ``nextface``: the single-illumination baseline: one light, no f, no g, no GP/LP/HP; the photometric
+  loss covers the whole render mask.
+- ``nextface-star``: ``nextface`` restricted to the face region h (NextFace* of the paper).
+- ``fast``: the paper's method with fewer iterations, a 192-px working image and 256-px textures, for
+  previews and tests.
+- ``default``: the preset ``deface fit`` uses when none is given (see DEFAULT_PRESET).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from deface.fit.config import (
+    DecoupleConfig,
+    FitConfig,
+    Iterations,
+    LearningRates,
+    LightConfig,
+    PriorConfig,
+    Weights,
+)
+
+# The paper's preset until the evaluation benchmark says otherwise (BENCHMARKS.md records the comparison).
+DEFAULT_PRESET = "paper"
+
+
+def _paper() -> FitConfig:
+    return FitConfig(preset="paper")
+
+
+def _code(name: str, *, num_lights: int, epsilon: float, w1: float, w2: float, w4: float,
+          scale: float, sh_lr: float, stage2: int) -> FitConfig:
+    return FitConfig(
+        preset=name,
+        lights=LightConfig(num_lights=num_lights, init="code", init_scale=scale),
+        decouple=DecoupleConfig(epsilon=epsilon),
+        # The code's w0 = 1000 with a factor 2 inside L_pho: 2e3 in the paper's units.
+        weights=Weights(landmarks=w1, segmentation=w2, binary=w4),
+        iterations=Iterations(stage2=stage2),
+        learning_rates=LearningRates(lights=sh_lr),
+    )
+
+
+def _nextface(name: str, restrict_to_face: bool) -> FitConfig:
+    return FitConfig(
+        preset=name,
+        lights=LightConfig(num_lights=1),
+        decouple=DecoupleConfig(light_masks=False, face_region=False, restrict_to_face=restrict_to_face),
+        priors=PriorConfig(global_prior=False, local_prior=False, human_prior=False),
+    )
+
+
+def _fast() -> FitConfig:
+    return FitConfig(
+        preset="fast",
+        resolution=192,
+        texture_size=256,
+        iterations=Iterations(stage1=150, stage2=150, stage3=60),
+        decouple=DecoupleConfig(ace_iteration=50),
+        shadow_rays=64,
+    )
+
+
+PRESETS = {
+    "paper": _paper,
+    "code-images": lambda: _code("code-images", num_lights=5, epsilon=0.15, w1=1.0, w2=120, w4=20,
+                                 scale=1.5, sh_lr=0.007, stage2=500),
+    "code-video": lambda: _code("code-video", num_lights=5, epsilon=0.15, w1=0.5, w2=150, w4=15,
+                                scale=1.5, sh_lr=0.01, stage2=400),
+    "code-portrait": lambda: _code("code-portrait", num_lights=7, epsilon=0.09, w1=1.0, w2=120, w4=5,
+                                   scale=1.0, sh_lr=0.003, stage2=1500),
+    "nextface": lambda: _nextface("nextface", restrict_to_face=False),
+    "nextface-star": lambda: _nextface("nextface-star", restrict_to_face=True),
+    "fast": _fast,
+}
+
+
+def names() -> list[str]:
+    return ["default", *PRESETS]
+
+
+def get(name: str) -> FitConfig:
+    """The preset's config; ``default`` resolves to DEFAULT_PRESET (recorded under its real name)."""
+    key = DEFAULT_PRESET if name == "default" else name
+    if key not in PRESETS:
+        raise ValueError(f"unknown preset '{name}' (choose from: {', '.join(names())})")
+    return PRESETS[key]()
+
+
+def with_ablation(config: FitConfig, *, num_lights: int | None = None, light_masks: bool | None = None,
+                  face_region: bool | None = None, priors: str | None = None,
+                  bands: int | None = None) -> FitConfig:
+    """Apply the paper's ablation switches. ``priors``: comma list of gp, lp, hp, or "none"."""
+    lights, decouple, prior_cfg = config.lights, config.decouple, config.priors
+    if num_lights is not None:
+        lights = replace(lights, num_lights=num_lights)
+    if bands is not None:
+        lights = replace(lights, bands=bands)
+    if light_masks is not None:
+        decouple = replace(decouple, light_masks=light_masks)
+    if face_region is not None:
+        decouple = replace(decouple, face_region=face_region)
+    if priors is not None:
+        chosen = {p.strip().lower() for p in priors.split(",") if p.strip()} - {"none", "na"}
+        unknown = chosen - {"gp", "lp", "hp"}
+        if unknown:
+            raise ValueError(f"unknown prior(s) {sorted(unknown)}: use a comma list of gp, lp, hp, or none")
+        prior_cfg = replace(prior_cfg, global_prior="gp" in chosen, local_prior="lp" in chosen,
+                            human_prior="hp" in chosen)
+    return replace(config, lights=lights, decouple=decouple, priors=prior_cfg)
