@@ -1,1 +1,16 @@
 """Loading inputs: images (EXIF orientation, sRGB <-> linear), folders, video frames."""
+
+from deface.io.images import InputError, linear_to_srgb, load_image, resize_max, srgb_to_linear
+from deface.io.inputs import InputItem, list_inputs
+from deface.io.video import read_video_frames
+
+__all__ = [
+    "InputError",
+    "InputItem",
+    "linear_to_srgb",
+    "list_inputs",
+    "load_image",
+    "read_video_frames",
+    "resize_max",
+    "srgb_to_linear",
+]
