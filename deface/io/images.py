@@ -77,7 +77,9 @@ def resize_max(image: np.ndarray, max_size: int) -> tuple[np.ndarray, float]:
     scale = max_size / longest
     new_w, new_h = max(1, round(width * scale)), max(1, round(height * scale))
     channels = [
-        np.asarray(Image.fromarray(image[..., c].astype(np.float32), mode="F").resize((new_w, new_h), Image.LANCZOS))
+        np.asarray(
+            Image.fromarray(image[..., c].astype(np.float32), mode="F").resize((new_w, new_h), Image.LANCZOS)
+        )
         for c in range(image.shape[2])
     ]
     return np.stack(channels, axis=-1).astype(np.float32), scale

@@ -46,9 +46,13 @@ def list_inputs(paths: Iterable[str | os.PathLike]) -> list[InputItem]:
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            found = [InputItem(p, kind) for p in sorted(path.iterdir()) if p.is_file() and (kind := classify(p))]
+            found = [
+                InputItem(p, kind) for p in sorted(path.iterdir()) if p.is_file() and (kind := classify(p))
+            ]
             if not found:
-                raise InputError(f"{path}: folder has no image or video files ({', '.join(IMAGE_EXTENSIONS)} ...)")
+                raise InputError(
+                    f"{path}: folder has no image or video files ({', '.join(IMAGE_EXTENSIONS)} ...)"
+                )
             items.extend(found)
         elif path.is_file():
             kind = classify(path)

@@ -55,14 +55,49 @@ MIN_OUTSIDE_DISTANCE_CM = 0.1
 # and the inner lips 60-67 are left out: their positions depend on pose / mouth opening.
 IBUG68_TO_MEDIAPIPE = {
     8: 152,  # chin
-    17: 70, 18: 63, 19: 105, 20: 66, 21: 107,  # subject's right brow (upper edge), outer -> inner
-    22: 336, 23: 296, 24: 334, 25: 293, 26: 300,  # subject's left brow, inner -> outer
-    27: 168, 28: 197, 29: 5, 30: 4,  # nose bridge -> tip
-    31: 98, 32: 97, 33: 2, 34: 326, 35: 327,  # nose base
-    36: 33, 37: 160, 38: 158, 39: 133, 40: 153, 41: 144,  # subject's right eye
-    42: 362, 43: 385, 44: 387, 45: 263, 46: 373, 47: 380,  # subject's left eye
-    48: 61, 49: 39, 50: 37, 51: 0, 52: 267, 53: 269, 54: 291,  # upper outer lip
-    55: 405, 56: 314, 57: 17, 58: 84, 59: 181,  # lower outer lip
+    17: 70,
+    18: 63,
+    19: 105,
+    20: 66,
+    21: 107,  # subject's right brow (upper edge), outer -> inner
+    22: 336,
+    23: 296,
+    24: 334,
+    25: 293,
+    26: 300,  # subject's left brow, inner -> outer
+    27: 168,
+    28: 197,
+    29: 5,
+    30: 4,  # nose bridge -> tip
+    31: 98,
+    32: 97,
+    33: 2,
+    34: 326,
+    35: 327,  # nose base
+    36: 33,
+    37: 160,
+    38: 158,
+    39: 133,
+    40: 153,
+    41: 144,  # subject's right eye
+    42: 362,
+    43: 385,
+    44: 387,
+    45: 263,
+    46: 373,
+    47: 380,  # subject's left eye
+    48: 61,
+    49: 39,
+    50: 37,
+    51: 0,
+    52: 267,
+    53: 269,
+    54: 291,  # upper outer lip
+    55: 405,
+    56: 314,
+    57: 17,
+    58: 84,
+    59: 181,  # lower outer lip
 }
 
 
@@ -191,12 +226,14 @@ def closest_point_on_triangles(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     d5, d6 = (ab * cp).sum(1), (ac * cp).sum(1)
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
     with np.errstate(divide="ignore", invalid="ignore"):
-        # Interior by default, then each Voronoi region overrides (later checks take precedence as in Ericson).
+        # Interior by default; each Voronoi region then overrides (the later checks win, as in Ericson).
         denom = va + vb + vc
         v_in, w_in = vb / denom, vc / denom
         result = a + ab * v_in[:, None] + ac * w_in[:, None]
         w_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        result = np.where(((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0))[:, None], b + (c - b) * w_bc[:, None], result)
+        result = np.where(
+            ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0))[:, None], b + (c - b) * w_bc[:, None], result
+        )
         w_ac = d2 / (d2 - d6)
         result = np.where(((vb <= 0) & (d2 >= 0) & (d6 <= 0))[:, None], a + ac * w_ac[:, None], result)
         v_ab = d1 / (d1 - d3)
@@ -212,7 +249,9 @@ def align_canonical(model: FaceModel, canonical: np.ndarray, icp_rounds: int = 1
     from scipy.interpolate import RBFInterpolator
 
     if model.landmarks_68 is None:
-        raise ValueError(f"model '{model.name}' has no landmarks_68: cannot anchor the MediaPipe correspondence")
+        raise ValueError(
+            f"model '{model.name}' has no landmarks_68: cannot anchor the MediaPipe correspondence"
+        )
     surface = SurfaceQuery(model.mean_shape.astype(np.float64), model.triangles)
     ibug = np.array(list(IBUG68_TO_MEDIAPIPE.keys()))
     mp_ids = np.array(list(IBUG68_TO_MEDIAPIPE.values()))
@@ -231,7 +270,9 @@ def align_canonical(model: FaceModel, canonical: np.ndarray, icp_rounds: int = 1
 
     aligned = _apply(similarity, canonical)
     # Non-rigid: a smoothed TPS displacement field that takes aligned anchors to the model's anchors.
-    warp = RBFInterpolator(aligned[mp_ids], anchors_model - aligned[mp_ids], kernel="thin_plate_spline", smoothing=1.0)
+    warp = RBFInterpolator(
+        aligned[mp_ids], anchors_model - aligned[mp_ids], kernel="thin_plate_spline", smoothing=1.0
+    )
     return aligned + warp(aligned)
 
 
@@ -268,7 +309,9 @@ def project_onto_model(model: FaceModel, points: np.ndarray) -> _Projection:
     offset = points - closest
     cosine = np.abs((offset * normals).sum(1)) / np.maximum(distance, 1e-9)
     outside = (cosine < np.cos(np.radians(MAX_TANGENT_ANGLE_DEG))) & (distance > MIN_OUTSIDE_DISTANCE_CM)
-    return _Projection(triangle_ids.astype(np.int64), bary.astype(np.float32), distance.astype(np.float32), outside)
+    return _Projection(
+        triangle_ids.astype(np.int64), bary.astype(np.float32), distance.astype(np.float32), outside
+    )
 
 
 def _cache_path(model: FaceModel, canonical: np.ndarray) -> Path:
@@ -295,7 +338,9 @@ def _load_or_build(model: FaceModel, canonical: np.ndarray, path: Path) -> _Proj
     if path.exists():
         try:
             data = np.load(path)
-            return _Projection(*(data[key] for key in ("triangle_ids", "barycentrics", "distance", "outside")))
+            return _Projection(
+                *(data[key] for key in ("triangle_ids", "barycentrics", "distance", "outside"))
+            )
         except (OSError, KeyError, ValueError):
             pass  # a broken cache file is rebuilt below
     projection = project_onto_model(model, align_canonical(model, canonical))
