@@ -1,0 +1,328 @@
+"""Differentiable CPU renderer: Embree primary visibility, torch shading under K SH lights at once.
+
+Pipeline (one call renders every light condition; the geometry is visited once):
+1. ``rasterize``: Embree casts one ray per pixel centre (only inside the mesh's projected bounding box)
+   and returns the hit triangle id. Barycentrics are then *recomputed in torch* from the projected
+   triangle corners (2-D edge functions at the pixel centre, then perspective-corrected with the
+   corners' camera depths), so gradients reach vertex positions and every camera parameter.
+2. ``shade``: per-vertex SH irradiance [V, K*3] (analytic unshadowed term minus the ray-traced occluded
+   transfer, see shadow.py) is interpolated to the covered pixels; diffuse radiance = albedo / pi * E.
+   A Phong specular lobe filtered in SH (see ``_specular``) is evaluated per pixel at the reflected view
+   direction, scaled by the interpolated vertex visibility (shadow approximation for the specular term).
+Background pixels are 0 in every output. Everything runs on the tensors' device; CPU is the reference.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from deface.render.camera import Camera
+from deface.render.mesh import Mesh, Textures, sample_texture
+from deface.render.raycast import RayScene
+from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
+from deface.render.sh import band_of_index, cosine_lobe_coefficients, phong_lobe_filter, sh_basis, sh_basis_rows
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """Renderer settings."""
+
+    bands: int = 9
+    """SH bands B of the lights (B² coefficients per colour) and of the shadow transfer."""
+    shadows: bool = True
+    """Ray-traced self-shadowing: ``render`` refreshes/uses its transfer cache when no transfer is given."""
+    shadow_rays: int = 256
+    """Shadow rays per vertex S for one transfer refresh (cost ~ V x S Embree any-hit queries)."""
+    specular: bool = True
+    """Add the roughness-driven Phong specular lobe; off gives a purely Lambertian render."""
+    shadow_tolerance_cm: float = 0.05
+    """The transfer cache recomputes when any vertex moved more than this (cm) since the last refresh."""
+    seed: int = 0
+    """Seed of the per-vertex random rotations of the shadow-ray pattern (renders are deterministic)."""
+    shadow_ray_offset: float = 1e-3
+    """Shadow-ray origins move along the normal by this fraction of the mesh's bounding-box diagonal."""
+
+
+@dataclass(frozen=True)
+class Fragments:
+    """What covers each pixel: the triangle from ray casting, barycentrics from torch."""
+
+    triangle_id: torch.Tensor  # [H, W] long, -1 on background
+    barycentrics: torch.Tensor  # [H, W, 3] perspective-correct, differentiable; 0 on background
+    mask: torch.Tensor  # [H, W] float, 1 where a triangle covers the pixel centre
+    covered: torch.Tensor  # [N] long, flat indices (y * W + x) of the covered pixels
+    covered_barycentrics: torch.Tensor  # [N, 3] barycentrics of the covered pixels (same graph)
+
+
+@dataclass(frozen=True)
+class RenderOutput:
+    """Images under each light plus screen-space buffers; background pixels are 0."""
+
+    images: torch.Tensor  # [K, H, W, 3] linear RGB radiance
+    mask: torch.Tensor  # [H, W] coverage M_R
+    uv: torch.Tensor  # [H, W, 2]
+    normals: torch.Tensor  # [H, W, 3] unit, model frame
+    depth: torch.Tensor  # [H, W] camera-frame z (cm)
+    triangle_id: torch.Tensor  # [H, W] long, -1 on background
+    diffuse: torch.Tensor  # [H, W, 3] screen-space diffuse albedo
+    specular: torch.Tensor  # [H, W, 3] screen-space specular albedo
+    roughness: torch.Tensor  # [H, W, 1] screen-space roughness
+
+
+class Renderer:
+    """Renders meshes under K SH lights; see the module docstring for the pipeline."""
+
+    def __init__(self, config: RenderConfig = RenderConfig()):
+        if config.bands < 1 or config.shadow_rays < 1:
+            raise ValueError("RenderConfig: bands and shadow_rays must be >= 1")
+        self.config = config
+        self.cache = ShadowTransferCache(self)
+        self._scene_key: tuple[np.ndarray, np.ndarray] | None = None
+        self._scene: RayScene | None = None
+
+    # -- visibility -------------------------------------------------------------------------------
+    def ray_scene(self, mesh: Mesh) -> RayScene:
+        """The Embree scene of ``mesh``, rebuilt only when vertices or triangles changed."""
+        verts = mesh.vertices.detach().cpu().numpy().astype(np.float32)
+        tris = mesh.triangles.cpu().numpy()
+        key = self._scene_key
+        if key is None or key[0].shape != verts.shape or key[1].shape != tris.shape \
+                or not np.array_equal(key[0], verts) or not np.array_equal(key[1], tris):
+            self._scene = RayScene(verts, tris)
+            self._scene_key = (verts, tris)
+        return self._scene
+
+    def rasterize(self, mesh: Mesh, camera: Camera) -> Fragments:
+        """Triangle id per pixel by Embree ray casting; perspective-correct barycentrics in torch."""
+        height, width = camera.height, camera.width
+        triangle_id = self._cast_primary(mesh, camera)  # [H*W] long numpy
+        covered = torch.from_numpy(np.nonzero(triangle_id >= 0)[0]).to(mesh.vertices.device)
+        tri = torch.from_numpy(triangle_id).to(mesh.vertices.device)[covered]  # [N]
+        bary = self._barycentrics(mesh, camera, tri, covered)  # [N, 3]
+        dtype = mesh.vertices.dtype
+        full = torch.zeros(height * width, 3, dtype=dtype, device=bary.device).index_copy(0, covered, bary)
+        tid = torch.from_numpy(triangle_id).to(mesh.vertices.device).reshape(height, width)
+        return Fragments(
+            triangle_id=tid,
+            barycentrics=full.reshape(height, width, 3),
+            mask=(tid >= 0).to(dtype),
+            covered=covered,
+            covered_barycentrics=bary,
+        )
+
+    def _cast_primary(self, mesh: Mesh, camera: Camera) -> np.ndarray:
+        """[H*W] triangle ids; only pixels inside the projected bounding box of the mesh are traced."""
+        height, width = camera.height, camera.width
+        with torch.no_grad():
+            pixels, depth = camera.project(mesh.vertices.detach())
+        triangle_id = np.full(height * width, -1, dtype=np.int64)
+        if bool((depth <= 0).any()):  # a vertex behind the camera: the projected box is meaningless
+            x0, y0, x1, y1 = 0, 0, width, height
+        else:
+            lo = pixels.min(0).values.floor().long().tolist()
+            hi = pixels.max(0).values.ceil().long().tolist()
+            x0, y0 = max(lo[0], 0), max(lo[1], 0)
+            x1, y1 = min(hi[0] + 1, width), min(hi[1] + 1, height)
+        if x0 >= x1 or y0 >= y1:
+            return triangle_id
+        ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
+        flat = (ys * width + xs).reshape(-1)
+        origins, directions = _pixel_rays(camera, xs.reshape(-1) + 0.5, ys.reshape(-1) + 0.5)
+        hit, _ = self.ray_scene(mesh).intersect(origins, directions)
+        triangle_id[flat] = hit
+        return triangle_id
+
+    @staticmethod
+    def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor) -> torch.Tensor:
+        """Perspective-correct barycentrics [N, 3] of the pixel centres ``covered`` in triangles ``tri``."""
+        pixels, depth = camera.project(mesh.vertices)  # [V, 2], [V]
+        corners = mesh.triangles[tri]  # [N, 3]
+        p = pixels[corners]  # [N, 3, 2]
+        z = depth[corners]  # [N, 3]
+        width = camera.width
+        q = torch.stack([covered % width, covered // width], -1).to(p.dtype) + 0.5  # [N, 2]
+
+        def cross2(a, b):
+            return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+        d0, d1, d2 = p[:, 0] - q, p[:, 1] - q, p[:, 2] - q
+        screen = torch.stack([cross2(d1, d2), cross2(d2, d0), cross2(d0, d1)], -1)  # [N, 3] ~ 2 x areas
+        area = screen.sum(-1, keepdim=True)
+        tiny = torch.finfo(p.dtype).tiny
+        area = torch.where(area.abs() < tiny, torch.full_like(area, tiny), area)
+        weights = screen / area / z  # perspective correction: screen barycentrics / depth
+        return weights / weights.sum(-1, keepdim=True)
+
+    def shadow_transfer(self, mesh: Mesh) -> ShadowTransfer:
+        """One refresh of the occluded SH transfer (V x shadow_rays Embree rays; see shadow.py)."""
+        cfg = self.config
+        return compute_shadow_transfer(
+            mesh.vertices, mesh.triangles, mesh.vertex_normals(), cfg.bands, cfg.shadow_rays,
+            seed=cfg.seed, offset=cfg.shadow_ray_offset, scene=self.ray_scene(mesh),
+        )
+
+    # -- shading ----------------------------------------------------------------------------------
+    def shade(
+        self,
+        mesh: Mesh,
+        camera: Camera,
+        fragments: Fragments,
+        textures: Textures,
+        sh_lights: torch.Tensor,
+        transfer: ShadowTransfer | None,
+    ) -> RenderOutput:
+        """Shade covered pixels under every light ``sh_lights`` [K, B², 3]; ``transfer`` None = no shadows."""
+        bands = _bands_of(sh_lights)
+        num_lights = sh_lights.shape[0]
+        height, width = camera.height, camera.width
+        covered, bary = fragments.covered, fragments.covered_barycentrics  # [N], [N, 3]
+        corners = mesh.triangles[fragments.triangle_id.reshape(-1)[covered]]  # [N, 3]
+        dtype = sh_lights.dtype
+        coeffs = sh_lights.permute(1, 0, 2).reshape(bands * bands, num_lights * 3)  # [B², K*3]
+
+        normals_v = mesh.vertex_normals()  # [V, 3]
+        lobe = cosine_lobe_coefficients(bands).to(device=coeffs.device, dtype=dtype)
+        transfer_v = sh_basis(normals_v.to(dtype), bands) * lobe  # [V, B²]
+        visibility = None
+        if transfer is not None:
+            if transfer.bands < bands or transfer.occluded.shape[0] != mesh.num_vertices:
+                raise ValueError(
+                    f"shade: transfer has {transfer.bands} bands for {transfer.occluded.shape[0]} vertices, "
+                    f"need >= {bands} bands for {mesh.num_vertices}"
+                )
+            transfer_v = transfer_v - transfer.occluded[:, : bands * bands].to(dtype)
+            visibility = transfer.visibility.to(dtype)
+        irradiance_v = transfer_v @ coeffs  # [V, K*3]
+        irradiance = _interpolate(irradiance_v, corners, bary)  # [N, K*3]
+
+        uv = _interpolate(mesh.uvs, mesh.triangle_uvs[fragments.triangle_id.reshape(-1)[covered]], bary)
+        diffuse = sample_texture(textures.diffuse, uv)  # [N, 3]
+        specular = sample_texture(textures.specular, uv)  # [N, 3]
+        roughness = sample_texture(textures.roughness, uv)  # [N, 1]
+        normals = _interpolate(normals_v, corners, bary)
+        normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [N, 3]
+
+        radiance = (irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]).reshape(-1, num_lights * 3)
+        if self.config.specular:
+            positions = _interpolate(mesh.vertices, corners, bary)  # [N, 3]
+            lit = _specular(positions, normals, roughness, camera, coeffs, bands)  # [N, K*3]
+            if visibility is not None:
+                lit = lit * _interpolate(visibility[:, None], corners, bary)
+            radiance = radiance + (lit.reshape(-1, num_lights, 3) * specular[:, None]).reshape(-1, num_lights * 3)
+
+        depth = _interpolate(camera.to_camera(mesh.vertices)[:, 2:], corners, bary)  # [N, 1]
+
+        def screen(values: torch.Tensor) -> torch.Tensor:  # [N, C] -> [H, W, C], zeros elsewhere
+            full = torch.zeros(height * width, values.shape[1], dtype=values.dtype, device=values.device)
+            return full.index_copy(0, covered, values).reshape(height, width, -1)
+
+        images = screen(radiance).reshape(height, width, num_lights, 3).permute(2, 0, 1, 3)
+        return RenderOutput(
+            images=images,
+            mask=fragments.mask,
+            uv=screen(uv),
+            normals=screen(normals),
+            depth=screen(depth)[..., 0],
+            triangle_id=fragments.triangle_id,
+            diffuse=screen(diffuse),
+            specular=screen(specular),
+            roughness=screen(roughness),
+        )
+
+    def render(
+        self,
+        mesh: Mesh,
+        camera: Camera,
+        textures: Textures,
+        sh_lights: torch.Tensor,
+        transfer: ShadowTransfer | None = None,
+    ) -> RenderOutput:
+        """rasterize + shade. With ``config.shadows`` and no ``transfer``, uses ``self.cache`` (refreshes
+        when the mesh moved more than ``shadow_tolerance_cm``); with ``shadows=False`` nothing is occluded."""
+        if self.config.shadows and transfer is None:
+            transfer = self.cache.get(mesh)
+        elif not self.config.shadows:
+            transfer = None
+        return self.shade(mesh, camera, self.rasterize(mesh, camera), textures, sh_lights, transfer)
+
+
+class ShadowTransferCache:
+    """Holds a Renderer's shadow transfer and refreshes it when the geometry moved.
+
+    Trigger: ``get(mesh)`` recomputes when there is no transfer yet, when the vertex count changed, or
+    when max_v |x_v - x_v(last refresh)| > ``config.shadow_tolerance_cm``. Between refreshes the stored
+    occluded transfer is reused as a constant (the analytic unshadowed term still follows the current
+    normals). Cost of a refresh: V x ``shadow_rays`` Embree any-hit rays plus SH of the occluded ones,
+    about 0.5-1 s for the 9,409-vertex ICT mesh at 256 rays (see benchmarks/render.md); a hit costs a
+    max-abs over the vertices.
+    """
+
+    def __init__(self, renderer: Renderer):
+        self.renderer = renderer
+        self.transfer: ShadowTransfer | None = None
+        self.refreshes = 0  # how many times the transfer was recomputed
+
+    def needs_refresh(self, mesh: Mesh) -> bool:
+        """Whether ``get(mesh)`` would recompute the transfer."""
+        if self.transfer is None or self.transfer.vertices.shape != mesh.vertices.shape:
+            return True
+        moved = (mesh.vertices.detach() - self.transfer.vertices.to(mesh.vertices)).abs().max()
+        return bool(moved > self.renderer.config.shadow_tolerance_cm)
+
+    def get(self, mesh: Mesh) -> ShadowTransfer:
+        """The current transfer for ``mesh``, recomputed first if the mesh moved beyond the tolerance."""
+        if self.needs_refresh(mesh):
+            self.transfer = self.renderer.shadow_transfer(mesh)
+            self.refreshes += 1
+        return self.transfer
+
+
+def _specular(
+    positions: torch.Tensor, normals: torch.Tensor, roughness: torch.Tensor, camera: Camera,
+    coeffs: torch.Tensor, bands: int,
+) -> torch.Tensor:
+    """Phong-lobe specular radiance per unit k_s, [N, K*3].
+
+    L_spec = sum_lm Lambda_l c_lm Y_lm(r), r = 2 (n.v) n - v the mirrored view direction, with the
+    Phong SH filter Lambda_l = exp(-l²/(2s)), s = 2/alpha² - 2 (Ramamoorthi & Hanrahan 2001, "A
+    signal-processing framework for inverse rendering"; Walter et al. 2007 for s(alpha)); see
+    ``sh.phong_lobe_filter``. A constant environment L gives k_s L.
+    """
+    view = camera.center_in_model().to(positions) - positions
+    view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [N, 3] towards the camera
+    reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [N, 3] unit
+    lobe = phong_lobe_filter(roughness[:, 0], bands).T  # [B, N]
+    lobe = lobe[band_of_index(bands, lobe.device)]  # [B², N]
+    basis = sh_basis_rows(reflected.to(coeffs.dtype), bands)  # [B², N], channel-first is faster
+    return (basis * lobe.to(coeffs.dtype)).T @ coeffs
+
+
+def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
+    """sum_i bary_i values[corners_i]: values [V, C], corners [N, 3], bary [N, 3] -> [N, C]."""
+    out = values[corners[:, 0]] * bary[:, :1]
+    out = out + values[corners[:, 1]] * bary[:, 1:2]
+    return out + values[corners[:, 2]] * bary[:, 2:3]
+
+
+def _pixel_rays(camera: Camera, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Model-frame rays through pixel positions (x right, y down): origins [N, 3], unit directions [N, 3]."""
+    focal = float(camera.focal)
+    dirs_cam = np.stack([(xs - camera.width / 2) / focal, (ys - camera.height / 2) / focal, np.ones_like(xs)], -1)
+    rot = camera.rotation_matrix.detach().double().cpu().numpy()
+    dirs = dirs_cam @ rot  # camera -> model: R^T d
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    origin = camera.center_in_model().detach().double().cpu().numpy()
+    return np.broadcast_to(origin, dirs.shape), dirs
+
+
+def _bands_of(sh_lights: torch.Tensor) -> int:
+    if sh_lights.ndim != 3 or sh_lights.shape[2] != 3:
+        raise ValueError(f"sh_lights must be [K, B², 3], got {tuple(sh_lights.shape)}")
+    bands = math.isqrt(sh_lights.shape[1])
+    if bands * bands != sh_lights.shape[1] or bands < 1:
+        raise ValueError(f"sh_lights: {sh_lights.shape[1]} coefficients is not a square number of bands")
+    return bands

@@ -1,0 +1,145 @@
+"""Real orthonormal spherical harmonics, any number of bands, differentiable in torch.
+
+Convention (shared by the whole project): coefficient index ``l*l + l + m`` for band ``l`` and order
+``-l <= m <= l``; no Condon-Shortley phase, so ``Y_1,-1 ∝ y``, ``Y_1,0 ∝ z``, ``Y_1,1 ∝ x``:
+
+    Y_l0  = N_l0 P_l^0(z)
+    Y_lm  = sqrt(2) N_lm P_l^m(z) cos(m phi)      m > 0
+    Y_l-m = sqrt(2) N_lm P_l^m(z) sin(m phi)      m > 0
+    N_lm  = sqrt((2l+1)/(4 pi) (l-m)!/(l+m)!)
+
+Evaluation is stable for many bands: we run the *fully normalised* associated-Legendre recurrence
+(Holmes & Featherstone 2002) on Q_l^m = N_lm P_l^m / sin^m(theta), a polynomial in z, and multiply by
+sin^m(theta) cos/sin(m phi) = Re/Im((x + i y)^m), another polynomial. Everything is a polynomial in
+(x, y, z), so gradients are finite everywhere, including the poles.
+
+Radiance of an SH light: ``L(w) = sum_lm c_lm Y_lm(w)``, w the unit direction towards the light.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import torch
+
+
+@lru_cache(maxsize=64)
+def _recurrence_constants(bands: int) -> tuple[list[float], list[tuple[list[float], list[float]]]]:
+    """Diagonal constants Q_m^m (direction independent) and the (a_lm, b_lm) rows of the l-recurrence."""
+    diagonal = [math.sqrt(1.0 / (4.0 * math.pi))]
+    for m in range(1, bands):
+        diagonal.append(diagonal[-1] * math.sqrt((2 * m + 1) / (2 * m)))
+    rows = []
+    for l in range(bands):  # noqa: E741 - l is the band index in every SH paper
+        a = [math.sqrt((4 * l * l - 1) / (l * l - m * m)) for m in range(max(l - 1, 0))]
+        b = [math.sqrt(((l - 1) ** 2 - m * m) / (4 * (l - 1) ** 2 - 1)) for m in range(max(l - 1, 0))]
+        rows.append((a, b))
+    return diagonal, rows
+
+
+def sh_basis(directions: torch.Tensor, bands: int) -> torch.Tensor:
+    """Real orthonormal SH basis at unit ``directions`` [..., 3] -> [..., bands²] (index l*l + l + m)."""
+    if directions.shape[-1] != 3:
+        raise ValueError(f"sh_basis: directions must have shape [..., 3], got {tuple(directions.shape)}")
+    rows = _ContiguousGrad.apply(sh_basis_rows(directions.reshape(-1, 3), bands))  # [B², N]
+    return rows.T.reshape(*directions.shape[:-1], bands * bands)
+
+
+class _ContiguousGrad(torch.autograd.Function):
+    """Identity whose backward makes the incoming gradient contiguous: the transposed gradient of
+    ``sh_basis`` would otherwise make every op of the recurrence's backward strided (5x slower)."""
+
+    @staticmethod
+    def forward(ctx, tensor: torch.Tensor) -> torch.Tensor:
+        return tensor.view_as(tensor)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> torch.Tensor:
+        return grad.contiguous()
+
+
+def sh_basis_rows(directions: torch.Tensor, bands: int) -> torch.Tensor:
+    """SH basis channel-first: unit directions [N, 3] -> [bands², N].
+
+    Same values as :func:`sh_basis`; every intermediate is a contiguous [m, N] block, which makes the
+    forward and the backward pass several times faster than a channel-last layout.
+    """
+    if directions.ndim != 2 or directions.shape[1] != 3:
+        raise ValueError(f"sh_basis_rows: directions must be [N, 3], got {tuple(directions.shape)}")
+    if bands < 1:
+        raise ValueError(f"sh_basis: bands must be >= 1, got {bands}")
+    x, y, z = directions.T.contiguous()  # [N] each
+    diagonal, recurrence = _recurrence_constants(bands)
+    opts = {"dtype": directions.dtype, "device": directions.device}
+
+    # (x + i y)^m = sin^m(theta) (cos m phi + i sin m phi), m = 0..bands-1.
+    cos_m, sin_m = [torch.ones_like(x)], [torch.zeros_like(x)]
+    for _ in range(1, bands):
+        c, s = cos_m[-1], sin_m[-1]
+        cos_m.append(c * x - s * y)
+        sin_m.append(s * x + c * y)
+    cos_stack = torch.stack(cos_m)  # [B, N]
+    sin_stack = torch.stack(sin_m)  # [B, N]
+
+    # Q rows: q_rows[l] holds Q_l^m for m = 0..l ([l+1, N]), all orders of a band at once.
+    q_rows = [torch.full_like(z, diagonal[0])[None]]
+    out = [q_rows[0]]
+    for l in range(1, bands):  # noqa: E741 - l is the band index in every SH paper
+        parts = []
+        if l >= 2:
+            a = torch.tensor(recurrence[l][0], **opts)[:, None]
+            b = torch.tensor(recurrence[l][1], **opts)[:, None]
+            parts.append(a * (z * q_rows[l - 1][: l - 1] - b * q_rows[l - 2][: l - 1]))  # m = 0..l-2
+        parts.append(math.sqrt(2 * l + 1) * z * q_rows[l - 1][l - 1 :])  # m = l-1
+        parts.append(torch.full_like(z, diagonal[l])[None])  # m = l
+        q = torch.cat(parts)  # [l+1, N]
+        q_rows.append(q)
+        scaled = math.sqrt(2.0) * q[1:]  # [l, N] for |m| = 1..l
+        out += [(scaled * sin_stack[1 : l + 1]).flip(0), q[:1], scaled * cos_stack[1 : l + 1]]
+    return torch.cat(out)
+
+
+def band_of_index(bands: int, device: torch.device | None = None) -> torch.Tensor:
+    """Band l of every coefficient index [bands²] (long)."""
+    return torch.repeat_interleave(torch.arange(bands, device=device), 2 * torch.arange(bands, device=device) + 1)
+
+
+def cosine_lobe_band(l: int) -> float:  # noqa: E741
+    """A_l of the clamped-cosine kernel max(cos, 0) (Ramamoorthi & Hanrahan 2001, "An efficient
+    representation for irradiance environment maps", eq. 8-9): irradiance E_lm = A_l L_lm.
+
+    A_0 = pi, A_1 = 2 pi / 3, A_l = 0 for odd l > 1, and for even l
+    A_l = 2 pi (-1)^(l/2 - 1) / ((l + 2)(l - 1)) * l! / (2^l ((l/2)!)^2).
+    """
+    if l == 0:
+        return math.pi
+    if l == 1:
+        return 2.0 * math.pi / 3.0
+    if l % 2:
+        return 0.0
+    half = l // 2
+    log_ratio = math.lgamma(l + 1) - l * math.log(2.0) - 2 * math.lgamma(half + 1)
+    return 2.0 * math.pi * (-1) ** (half - 1) / ((l + 2) * (l - 1)) * math.exp(log_ratio)
+
+
+def cosine_lobe_coefficients(bands: int) -> torch.Tensor:
+    """A_l repeated for each m of band l -> [bands²] float32 (irradiance E(n) = sum A_l c_lm Y_lm(n))."""
+    if bands < 1:
+        raise ValueError(f"cosine_lobe_coefficients: bands must be >= 1, got {bands}")
+    values = [cosine_lobe_band(l) for l in range(bands) for _ in range(2 * l + 1)]
+    return torch.tensor(values, dtype=torch.float32)
+
+
+def phong_lobe_filter(roughness: torch.Tensor, bands: int) -> torch.Tensor:
+    """SH filter of a normalised Phong lobe around the reflection direction, [...] -> [..., bands].
+
+    Lambda_l = exp(-l² / (2 s)) (Ramamoorthi & Hanrahan 2001, "A signal-processing framework for
+    inverse rendering", Phong BRDF in frequency space), with the Phong exponent from the Beckmann
+    roughness alpha by s = 2 / alpha² - 2 (Walter et al. 2007, "Microfacet models for refraction").
+    Lambda_0 = 1, so a constant environment L reflects k_s L. alpha is clamped to [1e-3, 1].
+    """
+    alpha = roughness.clamp(1e-3, 1.0)
+    exponent = (2.0 / (alpha * alpha) - 2.0).clamp_min(1e-4)  # [...]
+    l_sq = torch.arange(bands, dtype=roughness.dtype, device=roughness.device) ** 2
+    return torch.exp(-l_sq / (2.0 * exponent[..., None]))
