@@ -1,0 +1,58 @@
+"""The light-decoupling state one fit carries through stages 2 and 3: fields f and g, their pixel
+coordinates per frame, the classifier target h, and how M_L, M_o are formed under the config's switches.
+
+Switch semantics (the paper's ablations):
+- ``light_masks`` off: no f; every kept light gets mask 1/K (with n = 1: the single light, NextFace).
+- ``face_region`` off: no g; M_o = M_R * h when ``restrict_to_face`` (NextFace*), else M_o = M_R.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from deface.decouple.ace import ace_select
+from deface.decouple.coords import video_coordinates
+from deface.decouple.fields import FaceRegionField, LightMaskField
+from deface.fit.config import DecoupleConfig
+
+
+class Decoupling(torch.nn.Module):
+    """f, g and their inputs for T frames of size H x W."""
+
+    def __init__(self, config: DecoupleConfig, num_lights: int, num_frames: int, size: tuple[int, int]):
+        super().__init__()
+        width, height = size
+        self.config = config
+        self.light_field = LightMaskField(num_lights, hidden=config.hidden) if config.light_masks else None
+        self.region_field = FaceRegionField() if config.face_region else None
+        self.register_buffer("coords", video_coordinates(num_frames, height, width))  # [T, H, W, 3]
+        self._kept = list(range(num_lights))
+
+    @property
+    def kept(self) -> list[int]:
+        """Light indices in use (all before ACE)."""
+        return list(self._kept)
+
+    def light_masks(self, frame: int, coverage: torch.Tensor) -> torch.Tensor:
+        """M_L [K_kept, H, W] = M_R * f (renormalised over kept lights), or uniform without f."""
+        if self.light_field is None:
+            uniform = torch.full((len(self._kept), *coverage.shape), 1.0 / len(self._kept))
+            return uniform * coverage
+        masks = self.light_field(self.coords[frame])  # [H, W, K_kept]
+        return masks.permute(2, 0, 1) * coverage
+
+    def face_region(self, frame: int, coverage: torch.Tensor, classifier: torch.Tensor | None) -> torch.Tensor:
+        """M_o [H, W] under the switches (see module doc)."""
+        if self.region_field is not None:
+            return coverage * self.region_field(self.coords[frame])
+        if self.config.restrict_to_face and classifier is not None:
+            return coverage * classifier
+        return coverage
+
+    def run_ace(self, all_masks: torch.Tensor, coverage: torch.Tensor) -> list[int]:
+        """Select kept lights from M_N [T, n, H, W] (all lights) and M_R [T, H, W]; returns kept indices."""
+        kept = ace_select(all_masks, coverage, self.config.epsilon, self.config.area_normaliser)
+        self._kept = kept
+        if self.light_field is not None:
+            self.light_field.keep(kept)
+        return kept

@@ -1,0 +1,121 @@
+"""The whole fit for one input (an image, or the frames of a clip): landmarks -> stage 1 -> face region h
+-> stage 2 -> stage 3, returning everything the exporters and the evaluation need.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from deface.fit.config import FitConfig
+from deface.fit.decoupling import Decoupling
+from deface.fit.log import FitLog
+from deface.fit.scene import SceneParameters, initial_lights, topology_tensors
+from deface.fit.stage1 import Stage1Config, fit_landmarks
+from deface.fit.stage2 import FrameRender, StageContext, run_stage2
+from deface.fit.stage3 import FrozenFrame, freeze_frames, initial_textures, render_frozen, run_stage3
+from deface.fit.target import FitTarget, scale_landmarks, working_frames
+from deface.landmarks.correspondence import correspondence_for
+from deface.landmarks.detect import detect_landmarks, track_video
+from deface.models.registry import load_face_model
+from deface.priors.face_region import classifier_for
+from deface.priors.human_prior import load_human_prior
+from deface.render.mesh import Textures
+
+
+@dataclass
+class FitResult:
+    """A finished fit: textures, kept lights, per-frame geometry and renders, and the run record."""
+
+    context: StageContext
+    frozen: list[FrozenFrame]
+    textures: Textures  # final UV maps (stage 3)
+    initial_textures: Textures  # T^0 from the albedo model
+    log: FitLog
+    optional_networks: dict  # name -> "used" or the reason it was not
+
+    def render(self, textures: Textures | None = None) -> list[FrameRender]:
+        """Per-frame renders with the fit's geometry, lights and M_o, using ``textures`` (default: own)."""
+        textures = textures or self.textures
+        with torch.no_grad():
+            return [render_frozen(self.context, frame, textures)[0] for frame in self.frozen]
+
+    def composite(self, rendered: FrameRender, frame: int) -> torch.Tensor:
+        """I_out [H, W, 3] linear: the face where M_o says so, the input elsewhere."""
+        weight = rendered.face_region[..., None]
+        return rendered.face * weight + self.context.target.images[frame] * (1 - weight)
+
+
+def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool):
+    """Landmarks per frame at working resolution; frames without a face are dropped (video)."""
+    work, scale = working_frames(frames, config.resolution)
+    size = (work[0].shape[1], work[0].shape[0])
+    if video:
+        found = track_video(frames, face_index=config.face_index, source=source)
+    else:
+        found = [detect_landmarks(frames[0], face_index=config.face_index, source=source)]
+    keep = [i for i, item in enumerate(found) if item is not None]
+    return [work[i] for i in keep], [scale_landmarks(found[i], scale, size) for i in keep], scale
+
+
+def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source: str = "input",
+        video: bool = False, log: FitLog | None = None) -> FitResult:
+    """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``."""
+    torch.manual_seed(config.seed)
+    np.random.seed(config.seed)
+    log = log or FitLog(name=source)
+    model = load_face_model(config.model, models_dir)
+    log.start("landmarks")
+    work, landmarks, scale = detect(frames, config, source, video)
+    if landmarks[0].num_faces > 1:
+        log.info(f"{landmarks[0].num_faces} faces found; fitting face {config.face_index} (0 = largest)")
+    target = FitTarget(work, landmarks, scale)
+    log.stop("landmarks")
+    context = _stage1(model, target, config, log)
+    optional = _face_classifier(context, config, models_dir, log)
+    log.start("stage 2")
+    run_stage2(context)
+    log.stop("stage 2")
+    human_prior, reason = load_human_prior(models_dir) if config.priors.human_prior else (None, "off in config")
+    optional["facenet"] = "used" if human_prior is not None else reason
+    if human_prior is None and config.priors.human_prior:
+        log.info(f"human prior (FaceNet) not used: {reason}")
+    log.start("stage 3")
+    textures, _ = run_stage3(context, human_prior)
+    log.stop("stage 3")
+    initial = initial_textures(context)
+    frozen = freeze_frames(context, initial)
+    return FitResult(context, frozen, textures, initial, log, optional)
+
+
+def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog) -> StageContext:
+    log.start("stage 1")
+    corr = correspondence_for(model)
+    result = fit_landmarks(model, corr, target.landmarks, target.size,
+                           Stage1Config(iterations=config.iterations.stage1))
+    log.stop("stage 1")
+    target.attach_landmarks(corr, result)
+    scene = SceneParameters(
+        identity=torch.as_tensor(result.identity), expression=torch.as_tensor(result.expression),
+        rotation=torch.as_tensor(result.rotation), translation=torch.as_tensor(result.translation),
+        focal=torch.as_tensor(result.focal), albedo=torch.zeros(model.albedo.num_coeffs),
+        lights=initial_lights(config.lights),
+    )
+    decoupling = Decoupling(config.decouple, config.lights.num_lights, target.num_frames, target.size)
+    return StageContext(model, target, scene, decoupling, config, topology_tensors(model), log)
+
+
+@torch.no_grad()
+def _face_classifier(context: StageContext, config: FitConfig, models_dir, log: FitLog) -> dict:
+    """h per frame from the stage-1 face; returns which optional parser was used (for the run record)."""
+    classifier, note = classifier_for(config.decouple.face_region_source, models_dir)
+    log.info(f"face region h: {note}")
+    target = context.target
+    for frame in range(target.num_frames):
+        geometry = context.geometry(frame)
+        coverage = context.renderer.rasterize(geometry.mesh, geometry.camera).mask
+        h = classifier(target.frames_srgb[frame], coverage.numpy(), target.landmarks[frame].points)
+        target.face_classifier[frame] = torch.as_tensor(np.asarray(h), dtype=torch.float32)
+    return {"face_parsing": note}

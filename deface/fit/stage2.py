@@ -1,0 +1,162 @@
+"""Stage 2 (Alg. 1): statistical fit with light decoupling.
+
+Optimises identity, expression, pose, albedo coefficients delta, the n SH lights gamma and the fields f, g
+with  w0 L_pho + w1 L_lan + w2 L_seg + (w3 L_area before iter_0 | w4 L_bin after)  plus small coefficient
+priors; at iter_0 ACE keeps the lights whose masks are large enough. Focal length is frozen (authors' code).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from deface.fit.config import FitConfig
+from deface.fit.decoupling import Decoupling
+from deface.fit.scene import SceneParameters, frame_geometry
+from deface.fit.target import FitTarget
+from deface.losses import decouple as decouple_losses
+from deface.losses.photometric import photometric_loss
+from deface.render.mesh import Textures
+from deface.render.renderer import Renderer, ShadowTransferCache
+
+STAGE2_TEXTURE_SIZE = 128  # the albedo model's native resolution: stage 2's textures are smooth by design
+
+
+@dataclass
+class FrameRender:
+    """One frame's stage-2 products: per-light renders, buffers, masks and the composed face."""
+
+    light_images: torch.Tensor  # [K, H, W, 3] I_Rs (kept lights)
+    coverage: torch.Tensor  # [H, W] M_R
+    light_masks: torch.Tensor  # [K, H, W] M_L
+    face_region: torch.Tensor  # [H, W] M_o
+    face: torch.Tensor  # [H, W, 3] I_R
+
+
+class StageContext:
+    """What stages 2 and 3 share: model, target, scene, decoupling, renderer, shadow cache, logger."""
+
+    def __init__(self, model, target: FitTarget, scene: SceneParameters, decoupling: Decoupling,
+                 config: FitConfig, topology: dict, log):
+        self.model, self.target, self.scene, self.decoupling = model, target, scene, decoupling
+        self.config, self.topology, self.log = config, topology, log
+        self.renderer = Renderer(target.render_config(config))
+        self.shadow_caches = [ShadowTransferCache(self.renderer) for _ in range(target.num_frames)]
+
+    def geometry(self, frame: int):
+        return frame_geometry(self.model, self.scene, self.topology, frame, self.target.size)
+
+    def albedo_textures(self) -> Textures:
+        diffuse, specular = self.model.albedo.textures(self.scene.albedo, STAGE2_TEXTURE_SIZE)
+        roughness = torch.full((*diffuse.shape[:2], 1), self.model.albedo.roughness_default)
+        return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
+
+    def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool,
+                     all_lights: bool = False) -> FrameRender:
+        geometry = self.geometry(frame)
+        fragments = self.renderer.rasterize(geometry.mesh, geometry.camera)
+        transfer = self._transfer(frame, geometry.mesh, refresh_shadows)
+        kept = list(range(self.scene.lights.shape[0])) if all_lights else self.decoupling.kept
+        output = self.renderer.shade(geometry.mesh, geometry.camera, fragments, textures,
+                                     self.scene.lights[kept], transfer)
+        return self.compose(frame, output.images, output.mask)
+
+    def compose(self, frame: int, light_images: torch.Tensor, coverage: torch.Tensor) -> FrameRender:
+        light_masks = self.decoupling.light_masks(frame, coverage)
+        face_region = self.decoupling.face_region(frame, coverage, self.target.face_classifier[frame])
+        face = (light_images * light_masks[..., None]).sum(0)
+        return FrameRender(light_images, coverage, light_masks, face_region, face)
+
+    def _transfer(self, frame: int, mesh, refresh: bool):
+        if not self.config.shadows:
+            return None
+        cache = self.shadow_caches[frame]
+        return cache.get(mesh) if refresh or cache.current is None else cache.current
+
+    def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
+        return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
+                                rendered.coverage, form=self.config.decouple.loss_form)
+
+
+def run_stage2(context: StageContext) -> list[float]:
+    """Run stage 2 in place on ``context.scene`` / ``context.decoupling``; returns the loss per iteration."""
+    config, scene, decoupling = context.config, context.scene, context.decoupling
+    optimiser = torch.optim.Adam(_parameter_groups(context))
+    history = []
+    ace_at = min(config.decouple.ace_iteration, config.iterations.stage2 - 1)
+    for step in range(config.iterations.stage2):
+        if step == ace_at and decoupling.light_field is not None:
+            _apply_ace(context)
+        optimiser.zero_grad(set_to_none=True)
+        refresh = step % config.shadow_refresh_every == 0
+        loss = _stage2_loss(context, before_ace=step < ace_at, refresh_shadows=refresh)
+        loss.backward()
+        optimiser.step()
+        scene.clamp_(context.model.expression_prior)
+        history.append(float(loss))
+        context.log.step("stage 2", step, config.iterations.stage2, float(loss))
+    return history
+
+
+def _parameter_groups(context: StageContext) -> list[dict]:
+    rates, scene = context.config.learning_rates, context.scene
+    groups = [
+        {"params": [scene.lights], "lr": rates.lights},
+        {"params": [scene.identity], "lr": rates.identity},
+        {"params": [scene.albedo], "lr": rates.albedo},
+        {"params": [scene.expression], "lr": rates.expression},
+        {"params": [scene.rotation, scene.translation], "lr": rates.pose},
+    ]
+    if context.decoupling.light_field is not None:
+        groups.append({"params": context.decoupling.light_field.parameters(), "lr": rates.light_masks})
+    if context.decoupling.region_field is not None:
+        groups.append({"params": context.decoupling.region_field.parameters(), "lr": rates.face_region})
+    return groups
+
+
+def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool) -> torch.Tensor:
+    weights, scene, config = context.config.weights, context.scene, context.config
+    textures = context.albedo_textures()
+    total = torch.zeros(())
+    for frame in range(context.target.num_frames):
+        rendered = context.render_frame(frame, textures, refresh_shadows)
+        total = total + weights.photometric * context.photometric(frame, rendered)
+        total = total + weights.landmarks * context.target.landmark_loss(context, frame)
+        total = total + _decoupling_terms(context, frame, rendered, before_ace)
+    total = total / context.target.num_frames
+    total = total + weights.sh_regulariser * scene.lights[context.decoupling.kept].pow(2).mean()
+    total = total + weights.albedo_prior * scene.albedo.pow(2).mean()
+    total = total + weights.identity_prior * scene.identity.pow(2).mean()
+    total = total + weights.expression_prior * scene.expression.pow(2).mean()
+    del config
+    return total
+
+
+def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool) -> torch.Tensor:
+    weights, form = context.config.weights, context.config.decouple.loss_form
+    decoupling, total = context.decoupling, torch.zeros(())
+    if decoupling.region_field is not None and context.target.face_classifier[frame] is not None:
+        g = decoupling.region_field(decoupling.coords[frame])
+        total = total + weights.segmentation * decouple_losses.segmentation_loss(
+            g, context.target.face_classifier[frame], rendered.coverage, form=form)
+    if decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
+        if before_ace:
+            total = total + weights.area * decouple_losses.area_loss(rendered.light_masks, rendered.coverage,
+                                                                     form=form)
+        else:
+            total = total + weights.binary * decouple_losses.binary_loss(rendered.light_masks,
+                                                                         rendered.coverage, form=form)
+    return total
+
+
+@torch.no_grad()
+def _apply_ace(context: StageContext) -> None:
+    masks, coverages = [], []
+    for frame in range(context.target.num_frames):
+        geometry = context.geometry(frame)
+        coverage = context.renderer.rasterize(geometry.mesh, geometry.camera).mask
+        masks.append(context.decoupling.light_masks(frame, coverage))
+        coverages.append(coverage)
+    kept = context.decoupling.run_ace(torch.stack(masks), torch.stack(coverages))
+    context.log.info(f"ACE kept {len(kept)} of {context.scene.lights.shape[0]} lights: {kept}")

@@ -1,0 +1,168 @@
+"""Stage 3 (Alg. 1): per-texel refinement.
+
+Geometry, g and M_o are frozen at their stage-2 values (authors' code), so each frame is ray cast once and
+its shadow transfer computed once. Optimised: diffuse, specular and roughness UV maps T (initialised from
+the albedo model, T^0), the kept lights gamma and f, with
+    w0 L_pho + w4 L_bin + w5 L_GP + w6 L_LP + w7 L_HP + texture regularisers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from deface.fit.stage2 import FrameRender, StageContext
+from deface.losses import decouple as decouple_losses
+from deface.priors.global_prior import global_prior, kmeans_palette
+from deface.priors.local_prior import local_prior
+from deface.losses.texture import texture_regularisers
+from deface.render.mesh import Textures
+
+
+@dataclass
+class FrozenFrame:
+    """A frame's stage-3 constants: geometry, ray-cast fragments, shadow transfer, M_o, reference albedo."""
+
+    geometry: object
+    fragments: object
+    transfer: object
+    face_region: torch.Tensor  # [H, W] M_o from stage 2
+    reference: dict  # screen-space albedo renders of T^0: diffuse [H,W,3], specular [H,W,3], roughness [H,W,1]
+
+
+class TextureParameters(torch.nn.Module):
+    """The stage-3 UV maps, stored unconstrained and mapped to [0, 1] by clamping in :meth:`textures`."""
+
+    def __init__(self, initial: Textures):
+        super().__init__()
+        self.diffuse = torch.nn.Parameter(initial.diffuse.detach().clone())  # [Ht, Wt, 3]
+        self.specular = torch.nn.Parameter(initial.specular.detach().clone())  # [Ht, Wt, 3]
+        self.roughness = torch.nn.Parameter(initial.roughness.detach().clone())  # [Ht, Wt, 1]
+
+    def textures(self) -> Textures:
+        return Textures(self.diffuse.clamp(0, 1), self.specular.clamp(0, 1), self.roughness.clamp(0.05, 1))
+
+
+def initial_textures(context: StageContext) -> Textures:
+    """T^0 at the output resolution from the fitted albedo coefficients."""
+    size = context.config.texture_size
+    diffuse, specular = context.model.albedo.textures(context.scene.albedo.detach(), size)
+    roughness = torch.full((size, size, 1), context.model.albedo.roughness_default)
+    return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
+
+
+def run_stage3(context: StageContext, human_prior=None) -> tuple[Textures, list[float]]:
+    """Refine textures; returns the final textures and the loss per iteration."""
+    initial = initial_textures(context)
+    frozen = [_freeze(context, frame, initial) for frame in range(context.target.num_frames)]
+    parameters = TextureParameters(initial)
+    optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
+    palette = _palette(context, initial)
+    uv_mask = _uv_mask(context, initial)
+    history = []
+    for step in range(context.config.iterations.stage3):
+        optimiser.zero_grad(set_to_none=True)
+        textures = parameters.textures()
+        loss = sum(_frame_loss(context, f, textures, human_prior) for f in frozen) / len(frozen)
+        loss = loss + _texture_terms(context, textures, initial, palette, uv_mask)
+        loss.backward()
+        optimiser.step()
+        history.append(float(loss))
+        context.log.step("stage 3", step, context.config.iterations.stage3, float(loss))
+    return parameters.textures(), history
+
+
+def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, object]:
+    """Shade a frozen frame with ``textures`` and the current kept lights; M_o stays frozen."""
+    geometry = frame.geometry
+    output = context.renderer.shade(geometry.mesh, geometry.camera, frame.fragments, textures,
+                                    context.scene.lights[context.decoupling.kept], frame.transfer)
+    rendered = context.compose(frame.index, output.images, output.mask)
+    rendered.face_region = frame.face_region
+    return rendered, output
+
+
+def freeze_frames(context: StageContext, initial: Textures) -> list[FrozenFrame]:
+    return [_freeze(context, frame, initial) for frame in range(context.target.num_frames)]
+
+
+@torch.no_grad()
+def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame:
+    geometry = context.geometry(frame)
+    geometry = type(geometry)(
+        mesh=type(geometry.mesh)(geometry.mesh.vertices.detach(), *_topology(context)),
+        camera=type(geometry.camera)(
+            geometry.camera.focal.detach(), geometry.camera.rotation.detach(),
+            geometry.camera.translation.detach(), geometry.camera.width, geometry.camera.height),
+    )
+    fragments = context.renderer.rasterize(geometry.mesh, geometry.camera)
+    transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.shadows else None
+    output = context.renderer.shade(geometry.mesh, geometry.camera, fragments, initial,
+                                    context.scene.lights[context.decoupling.kept], transfer)
+    coverage = output.mask
+    face_region = context.decoupling.face_region(frame, coverage, context.target.face_classifier[frame])
+    reference = {"diffuse": output.diffuse, "specular": output.specular, "roughness": output.roughness}
+    frozen = FrozenFrame(geometry, fragments, transfer, face_region.detach(), reference)
+    frozen.index = frame
+    return frozen
+
+
+def _topology(context: StageContext):
+    topology = context.topology
+    return topology["triangles"], topology["uvs"], topology["triangle_uvs"]
+
+
+def _parameter_groups(context: StageContext, parameters: TextureParameters) -> list[dict]:
+    rates = context.config.learning_rates
+    groups = [
+        {"params": [parameters.diffuse], "lr": rates.stage3_diffuse},
+        {"params": [parameters.specular], "lr": rates.stage3_specular},
+        {"params": [parameters.roughness], "lr": rates.stage3_roughness},
+        {"params": [context.scene.lights], "lr": rates.stage3_lights},
+    ]
+    if context.decoupling.light_field is not None:
+        groups.append({"params": context.decoupling.light_field.parameters(), "lr": rates.stage3_light_masks})
+    return groups
+
+
+def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, human_prior) -> torch.Tensor:
+    weights, priors, form = context.config.weights, context.config.priors, context.config.decouple.loss_form
+    rendered, output = render_frozen(context, frame, textures)
+    loss = weights.photometric * context.photometric(frame.index, rendered)
+    if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
+        loss = loss + weights.binary * decouple_losses.binary_loss(rendered.light_masks, rendered.coverage,
+                                                                   form=form)
+    if priors.local_prior:
+        loss = loss + weights.local_prior * _local_prior(output, frame.reference, rendered.coverage)
+    if priors.human_prior and human_prior is not None:
+        loss = loss + weights.human_prior * human_prior(rendered.light_images, rendered.coverage)
+    return loss
+
+
+def _local_prior(output, reference: dict, coverage: torch.Tensor) -> torch.Tensor:
+    """The authors' weighting: 5 x diffuse + 6 x specular + 1 x roughness, on screen-space albedo."""
+    return (5.0 * local_prior(output.diffuse, reference["diffuse"], coverage)
+            + 6.0 * local_prior(output.specular, reference["specular"], coverage)
+            + local_prior(output.roughness, reference["roughness"], coverage))
+
+
+def _palette(context: StageContext, initial: Textures):
+    if not context.config.priors.global_prior:
+        return None
+    return kmeans_palette(initial.diffuse, _uv_mask(context, initial), k=context.config.priors.palette_size,
+                          seed=context.config.seed)
+
+
+def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:
+    mask = torch.as_tensor(context.model.albedo.face_mask, dtype=torch.float32)
+    size = initial.diffuse.shape[0]
+    return torch.nn.functional.interpolate(mask[None, None], size=(size, size), mode="bilinear")[0, 0]
+
+
+def _texture_terms(context: StageContext, textures: Textures, initial: Textures, palette, uv_mask) -> torch.Tensor:
+    weights = context.config.weights
+    loss = weights.texture_regulariser * texture_regularisers(textures, initial, uv_mask)
+    if palette is not None:
+        loss = loss + weights.global_prior * global_prior(textures.diffuse, palette, uv_mask)
+    return loss

@@ -1,0 +1,58 @@
+"""What a fit is fitted to: the working-resolution frames (linear RGB), their landmarks, and the
+face-region classifier's output h per frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from deface.fit.config import FitConfig
+from deface.io.images import resize_max, srgb_to_linear
+from deface.landmarks.detect import Landmarks
+from deface.render.renderer import RenderConfig
+
+
+@dataclass
+class FitTarget:
+    """T frames of size (W, H): sRGB for classifiers/outputs, linear for the photometric loss."""
+
+    frames_srgb: list[np.ndarray]  # T x [H, W, 3] float32 in [0, 1]
+    landmarks: list[Landmarks]  # T detections at working resolution
+    scale: float  # working / original resolution
+    face_classifier: list[torch.Tensor | None] = field(default_factory=list)  # T x [H, W] h, set later
+    images: torch.Tensor = field(init=False)  # [T, H, W, 3] linear RGB
+
+    def __post_init__(self) -> None:
+        self.images = torch.as_tensor(np.stack([srgb_to_linear(f) for f in self.frames_srgb]), dtype=torch.float32)
+        if not self.face_classifier:
+            self.face_classifier = [None] * len(self.frames_srgb)
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.frames_srgb)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) of the working frames."""
+        height, width = self.frames_srgb[0].shape[:2]
+        return width, height
+
+    @staticmethod
+    def render_config(config: FitConfig) -> RenderConfig:
+        return RenderConfig(bands=config.lights.bands, shadows=config.shadows, shadow_rays=config.shadow_rays,
+                            seed=config.seed)
+
+
+def working_frames(frames: list[np.ndarray], resolution: int) -> tuple[list[np.ndarray], float]:
+    """Resize frames so the longest side is at most ``resolution``; returns frames and the scale."""
+    resized = [resize_max(frame, resolution) for frame in frames]
+    return [image for image, _ in resized], resized[0][1]
+
+
+def scale_landmarks(landmarks: Landmarks, scale: float, size: tuple[int, int]) -> Landmarks:
+    """Landmarks detected on the original frame, expressed at working resolution."""
+    return Landmarks(landmarks.points * scale, landmarks.depth * scale, size, landmarks.num_faces,
+                     landmarks.face_index)
