@@ -54,10 +54,16 @@ def fit_command(
     except (InputError, ValueError) as error:
         console.print(f"[red]error:[/red] {error}")
         raise typer.Exit(2) from None
+    if run(items, output, config, models, overwrite, quiet):
+        raise typer.Exit(1)
+
+
+def run(items: list[InputItem], output: Path, config: FitConfig, models=None, overwrite: bool = False,
+        quiet: bool = False) -> int:
+    """Fit and write every input; returns the number that failed (each failure printed in one line)."""
     failures = sum(not _fit_one(item, output, config, models, overwrite, quiet) for item in items)
     console.print(f"{len(items) - failures} of {len(items)} input(s) done, {failures} failed; outputs in {output}")
-    if failures:
-        raise typer.Exit(1)
+    return failures
 
 
 def _config(preset, seed, lights, bands, light_masks, face_region, priors, resolution, iterations,
