@@ -1,0 +1,79 @@
+"""`deface bench`: benchmark data; `deface bench make-shadows` casts synthetic foreign shadows on photos."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from deface.paths import shared_dir
+
+# The reference benchmark: clean single-face photos of ../shared/data/images (choice and reasons in
+# docs/evaluation.md). Used when make-shadows is given no PHOTOS.
+REFERENCE_PHOTOS = (
+    "000031.jpg", "015270.jpg", "IMG_0392_inputs.jpg", "JianzhuGuo.jpg", "image02202.jpg",
+    "nextface-s1.png", "nextface-s2.png", "nextface-s3.png", "nextface-s5.png", "nextface-s6.png",
+    "nextface-s7.png", "psm-clean-006.png", "psm-clean-008.png", "vd006.png", "vd092.png", "vd102.png",
+)
+
+
+def register(app: typer.Typer) -> None:
+    bench = typer.Typer(no_args_is_help=True, help="Benchmark data: synthetic shadow pairs.")
+    bench.command("make-shadows")(make_shadows_command)
+    app.add_typer(bench, name="bench")
+
+
+def _reference_photos() -> list[Path]:
+    shared = shared_dir()
+    if shared is None:
+        raise typer.BadParameter("no PHOTOS given and ../shared is absent (set DEFACE_SHARED or pass photos)")
+    return [shared / "data" / "images" / name for name in REFERENCE_PHOTOS]
+
+
+def _default_silhouettes() -> Path | None:
+    shared = shared_dir()
+    folder = shared / "data" / "shadow-silhouettes" if shared else None
+    return folder if folder is not None and folder.is_dir() else None
+
+
+def make_shadows_command(
+    output: Annotated[Path, typer.Option("-o", "--output", help="Benchmark folder to write.")],
+    photos: Annotated[
+        list[Path] | None, typer.Argument(help="Clean face photos; default: the reference set in ../shared.")
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Random seed; the same seed gives identical files.")] = 0,
+    per_photo: Annotated[int, typer.Option("--per-photo", help="Shadowed variants per photo.")] = 1,
+    max_size: Annotated[int, typer.Option("--max-size", help="Shrink to this longest side.")] = 512,
+    silhouettes: Annotated[
+        Path | None,
+        typer.Option(help="Folder of silhouette PNGs; default ../shared/data/shadow-silhouettes."),
+    ] = None,
+    mediapipe: Annotated[bool, typer.Option(help="Find the face with MediaPipe.")] = True,
+) -> None:
+    """Write OUTPUT/<photo>-<k>/{source,target,shadow_mask}.png and OUTPUT/manifest.json."""
+    from rich.console import Console
+
+    from deface.eval.shadows import SHAPE_KINDS, ShadowConfig, make_shadow_benchmark
+
+    photos = list(photos) if photos else _reference_photos()
+    missing = [str(p) for p in photos if not Path(p).is_file()]
+    if missing:
+        raise typer.BadParameter(f"photo(s) not found: {', '.join(missing)}")
+    folder = silhouettes or _default_silhouettes()
+    if silhouettes is not None and not silhouettes.is_dir():
+        raise typer.BadParameter(f"--silhouettes {silhouettes} is not a folder")
+    files = tuple(str(p) for p in sorted(folder.glob("*.png"))) if folder else ()
+    kinds = SHAPE_KINDS if files else tuple(k for k in SHAPE_KINDS if k != "silhouette")
+    config = ShadowConfig(kinds=kinds, silhouettes=files)
+    manifest = make_shadow_benchmark(
+        photos, output, seed=seed, per_photo=per_photo, max_size=max_size, use_mediapipe=mediapipe,
+        config=config,
+    )
+    console = Console()
+    for pair in manifest["pairs"]:
+        console.print(
+            f"{pair['name']}: {pair['kind']:<10} coverage {pair['coverage']:.2f} keep {pair['keep']:.2f} "
+            f"face {pair['face_region']}"
+        )
+    console.print(f"wrote {len(manifest['pairs'])} pairs to {output}")
