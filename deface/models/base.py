@@ -29,6 +29,7 @@ class AlbedoModel:
     roughness_default: float  # a constant roughness map value (Beckmann/GGX alpha)
     face_mask: np.ndarray  # [Ht, Wt] float in [0, 1], texels covered by the face's UV layout
     description: str  # where the numbers come from (shown in params.json)
+    component_names: tuple[str, ...] = ()  # optional name per coefficient (e.g. "melanin:s0v0")
 
     @property
     def num_coeffs(self) -> int:

@@ -2,10 +2,13 @@
 
 The pack ``ict-facekit/ict_face_area_v9409_f16.npz`` is found through :mod:`deface.paths`
 (``--models DIR``, ``DEFACE_MODELS``, the user cache). Quads are split into two triangles each.
+ICT-FaceKit has no albedo model; :func:`load_ict` attaches the project's own prior
+(:mod:`deface.models.albedo_prior`, docs/albedo-prior.md).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from functools import lru_cache
 
@@ -25,9 +28,12 @@ def quads_to_triangles(faces: np.ndarray) -> np.ndarray:
     return np.concatenate([first, second]).astype(np.int64)
 
 
+def _key(models_dir: str | os.PathLike | None) -> str | None:
+    return None if models_dir is None else str(models_dir)
+
+
 @lru_cache(maxsize=4)
-def load_ict(models_dir: str | os.PathLike | None = None) -> FaceModel:
-    """Load the ICT-FaceKit face area (geometry, UVs, landmarks) from the pack."""
+def _load_geometry(models_dir: str | None) -> FaceModel:
     path = find_model_file(ICT_PACK, models_dir)
     if path is None:
         raise ModelFileError(
@@ -48,3 +54,20 @@ def load_ict(models_dir: str | os.PathLike | None = None) -> FaceModel:
         albedo=None,
         landmarks_68=pack["landmarks_multipie68"].astype(np.int64),
     )
+
+
+def load_ict_geometry(models_dir: str | os.PathLike | None = None) -> FaceModel:
+    """The ICT-FaceKit face area (geometry, UVs, landmarks) without an albedo model."""
+    return _load_geometry(_key(models_dir))
+
+
+@lru_cache(maxsize=4)
+def _load_with_albedo(models_dir: str | None) -> FaceModel:
+    from deface.models.albedo_prior import ict_albedo_prior
+
+    return dataclasses.replace(_load_geometry(models_dir), albedo=ict_albedo_prior(models_dir))
+
+
+def load_ict(models_dir: str | os.PathLike | None = None) -> FaceModel:
+    """Load the ICT-FaceKit face area with the project's albedo prior attached (cached per models_dir)."""
+    return _load_with_albedo(_key(models_dir))
