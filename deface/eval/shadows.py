@@ -25,7 +25,8 @@ occluder on black) and procedural shapes (hat brim, leaves, fingers, window blin
 canonical occluder plane around the face and projected by a random homography (rotation, scale,
 perspective jitter of the plane's corners, offset). The face is located with MediaPipe (static mode;
 the region is the convex hull of the landmarks) or a centred fallback ellipse; samples are redrawn
-until the hard shadow covers ``coverage`` (15-50%) of that region.
+until the hard shadow covers ``coverage`` (15-50%) of that region. The shadow fades out beyond the
+head (``receiver``): the occluder is near the face, so the background (far behind) is not shadowed.
 
 Everything random comes from ``numpy.random.default_rng([seed, crc32(photo stem), k])`` and is
 recorded in the manifest, so a benchmark is reproducible bit for bit and independent of photo order.
@@ -64,7 +65,7 @@ class ShadowConfig:
     """Per-channel factor of the umbra's remaining (ambient) light."""
     penumbra: tuple[float, float] = (0.004, 0.035)
     """Penumbra Gaussian sigma as a fraction of the face size (min, max over the face)."""
-    sss_sigma: tuple[float, float] = (0.008, 0.02)
+    sss_sigma: tuple[float, float] = (0.015, 0.035)
     """Subsurface-scattering blur of the red channel, fraction of the face size."""
     sss_green_blue: tuple[float, float] = (0.35, 0.25)
     """Green and blue SSS sigma as fractions of the red one (red scatters furthest in skin)."""
@@ -72,6 +73,9 @@ class ShadowConfig:
     """Amplitude of the low-frequency intensity variation of the matte."""
     perspective: float = 0.15
     """Max corner jitter of the occluder plane, fraction of the plane's size."""
+    receiver: tuple[float, float] = (0.1, 0.35)
+    """The shadow falls on the head: full strength up to the first distance from the face region,
+    fading to zero at the second (fractions of the face size); the background is taken to be far."""
     max_tries: int = 40
     """Samples drawn per shadow before taking the one closest to the coverage range."""
 
@@ -320,6 +324,14 @@ def shade(target_srgb: np.ndarray, matte_rgb: np.ndarray, keep: float, tint: np.
     return linear_to_srgb(linear * attenuation)
 
 
+def receiver_weight(region: np.ndarray, size: float, falloff: tuple[float, float]) -> np.ndarray:
+    """``[H, W]`` weight: 1 near the face region, 0 beyond ``falloff[1] * size`` from it."""
+    outside = (~region).astype(np.uint8)
+    distance = cv2.distanceTransform(outside, cv2.DIST_L2, 5) / size  # 0 inside the region
+    t = np.clip((distance - falloff[0]) / max(falloff[1] - falloff[0], 1e-6), 0.0, 1.0)
+    return (1.0 - t * t * (3 - 2 * t)).astype(np.float32)  # smoothstep
+
+
 def _sample_hard_matte(rng, config: ShadowConfig, region: np.ndarray) -> tuple[np.ndarray, dict]:
     """Draw occluders + homographies until the hard shadow covers ``config.coverage`` of the region."""
     height, width = region.shape
@@ -354,6 +366,7 @@ def synthesize_shadow(
     height, width = region.shape
     hard, params = _sample_hard_matte(rng, config, region)
     centre, size = _face_box(region)
+    hard = hard * receiver_weight(region, size, config.receiver)
 
     # 1. penumbra: sigma ramps linearly across the face in a random direction
     pen = sorted(rng.uniform(*config.penumbra, 2) * size)
