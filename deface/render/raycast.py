@@ -25,14 +25,16 @@ class RayScene:
         self._mesh = TriangleMesh(self._scene, vertices, triangles)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """First hits of rays [N, 3] -> (triangle id [N] int64, -1 for a miss; distance t [N] float32, inf on miss)."""
+        """First hits of rays [N, 3] ->
+        (triangle id [N] int64, -1 on a miss; distance [N] float32, inf on a miss)."""
         result = self._scene.run(_f32(origins), _f32(directions), output=1)
         tri = result["primID"].astype(np.int64)
         dist = np.where(tri >= 0, result["tfar"], np.inf).astype(np.float32)
         return tri, dist
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """Whether each ray [N, 3] hits anything -> bool [N] (Embree's any-hit query, faster than closest hit)."""
+        """Whether each ray [N, 3] hits anything -> bool [N]
+        (Embree's any-hit query, cheaper than a closest hit)."""
         return self._scene.run(_f32(origins), _f32(directions), query="OCCLUDED") >= 0
 
 

@@ -23,8 +23,14 @@ import torch
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures, sample_texture
 from deface.render.raycast import RayScene
+from deface.render.sh import (
+    band_of_index,
+    cosine_lobe_coefficients,
+    phong_lobe_filter,
+    sh_basis,
+    sh_basis_rows,
+)
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
-from deface.render.sh import band_of_index, cosine_lobe_coefficients, phong_lobe_filter, sh_basis, sh_basis_rows
 
 
 @dataclass(frozen=True)
@@ -98,14 +104,27 @@ class Renderer:
 
     def rasterize(self, mesh: Mesh, camera: Camera) -> Fragments:
         """Triangle id per pixel by Embree ray casting; perspective-correct barycentrics in torch."""
+        triangle_id = torch.from_numpy(self._cast_primary(mesh, camera))
+        return self.fragments_for(mesh, camera, triangle_id.reshape(camera.height, camera.width))
+
+    @staticmethod
+    def fragments_for(mesh: Mesh, camera: Camera, triangle_id: torch.Tensor) -> Fragments:
+        """Fragments for given per-pixel triangle ids [H, W] (-1 background), no ray casting.
+
+        Barycentrics are recomputed from ``mesh`` and ``camera``: use it to keep visibility fixed while
+        geometry changes slightly (finite differences, several shading passes).
+        """
         height, width = camera.height, camera.width
-        triangle_id = self._cast_primary(mesh, camera)  # [H*W] long numpy
-        covered = torch.from_numpy(np.nonzero(triangle_id >= 0)[0]).to(mesh.vertices.device)
-        tri = torch.from_numpy(triangle_id).to(mesh.vertices.device)[covered]  # [N]
-        bary = self._barycentrics(mesh, camera, tri, covered)  # [N, 3]
-        dtype = mesh.vertices.dtype
-        full = torch.zeros(height * width, 3, dtype=dtype, device=bary.device).index_copy(0, covered, bary)
-        tid = torch.from_numpy(triangle_id).to(mesh.vertices.device).reshape(height, width)
+        if tuple(triangle_id.shape) != (height, width):
+            raise ValueError(
+                f"fragments_for: triangle_id must be [{height}, {width}], got {tuple(triangle_id.shape)}"
+            )
+        device, dtype = mesh.vertices.device, mesh.vertices.dtype
+        tid = triangle_id.to(device=device, dtype=torch.long)
+        flat = tid.reshape(-1)
+        covered = torch.nonzero(flat >= 0)[:, 0]  # [N]
+        bary = _barycentrics(mesh, camera, flat[covered], covered)  # [N, 3]
+        full = torch.zeros(height * width, 3, dtype=dtype, device=device).index_copy(0, covered, bary)
         return Fragments(
             triangle_id=tid,
             barycentrics=full.reshape(height, width, 3),
@@ -136,27 +155,6 @@ class Renderer:
         triangle_id[flat] = hit
         return triangle_id
 
-    @staticmethod
-    def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor) -> torch.Tensor:
-        """Perspective-correct barycentrics [N, 3] of the pixel centres ``covered`` in triangles ``tri``."""
-        pixels, depth = camera.project(mesh.vertices)  # [V, 2], [V]
-        corners = mesh.triangles[tri]  # [N, 3]
-        p = pixels[corners]  # [N, 3, 2]
-        z = depth[corners]  # [N, 3]
-        width = camera.width
-        q = torch.stack([covered % width, covered // width], -1).to(p.dtype) + 0.5  # [N, 2]
-
-        def cross2(a, b):
-            return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-        d0, d1, d2 = p[:, 0] - q, p[:, 1] - q, p[:, 2] - q
-        screen = torch.stack([cross2(d1, d2), cross2(d2, d0), cross2(d0, d1)], -1)  # [N, 3] ~ 2 x areas
-        area = screen.sum(-1, keepdim=True)
-        tiny = torch.finfo(p.dtype).tiny
-        area = torch.where(area.abs() < tiny, torch.full_like(area, tiny), area)
-        weights = screen / area / z  # perspective correction: screen barycentrics / depth
-        return weights / weights.sum(-1, keepdim=True)
-
     def shadow_transfer(self, mesh: Mesh) -> ShadowTransfer:
         """One refresh of the occluded SH transfer (V x shadow_rays Embree rays; see shadow.py)."""
         cfg = self.config
@@ -185,36 +183,34 @@ class Renderer:
         coeffs = sh_lights.permute(1, 0, 2).reshape(bands * bands, num_lights * 3)  # [B², K*3]
 
         normals_v = mesh.vertex_normals()  # [V, 3]
-        lobe = cosine_lobe_coefficients(bands).to(device=coeffs.device, dtype=dtype)
-        transfer_v = sh_basis(normals_v.to(dtype), bands) * lobe  # [V, B²]
-        visibility = None
-        if transfer is not None:
-            if transfer.bands < bands or transfer.occluded.shape[0] != mesh.num_vertices:
-                raise ValueError(
-                    f"shade: transfer has {transfer.bands} bands for {transfer.occluded.shape[0]} vertices, "
-                    f"need >= {bands} bands for {mesh.num_vertices}"
-                )
-            transfer_v = transfer_v - transfer.occluded[:, : bands * bands].to(dtype)
-            visibility = transfer.visibility.to(dtype)
-        irradiance_v = transfer_v @ coeffs  # [V, K*3]
-        irradiance = _interpolate(irradiance_v, corners, bary)  # [N, K*3]
+        irradiance_v = _vertex_irradiance(normals_v.to(dtype), coeffs, bands, transfer)  # [V, K*3]
+        visibility = None if transfer is None else transfer.visibility.to(dtype)
 
-        uv = _interpolate(mesh.uvs, mesh.triangle_uvs[fragments.triangle_id.reshape(-1)[covered]], bary)
+        # One gather for every per-vertex quantity (index_select's backward is a fast index_add).
+        camera_z = camera.to_camera(mesh.vertices)[:, 2:]  # [V, 1]
+        per_vertex = [irradiance_v, normals_v.to(dtype), camera_z.to(dtype)]
+        if self.config.specular:
+            per_vertex.append(mesh.vertices.to(dtype))
+            if visibility is not None:
+                per_vertex.append(visibility[:, None])
+        sizes = [t.shape[1] for t in per_vertex]
+        pixel_values = _interpolate(torch.cat(per_vertex, 1), corners, bary).split(sizes, 1)
+        irradiance, normals, depth = pixel_values[:3]  # [N, K*3], [N, 3], [N, 1]
+        normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+        uv_corners = mesh.triangle_uvs[fragments.triangle_id.reshape(-1)[covered]]  # [N, 3]
+        uv = _interpolate(mesh.uvs.to(dtype), uv_corners, bary)  # [N, 2]
         diffuse = sample_texture(textures.diffuse, uv)  # [N, 3]
         specular = sample_texture(textures.specular, uv)  # [N, 3]
         roughness = sample_texture(textures.roughness, uv)  # [N, 1]
-        normals = _interpolate(normals_v, corners, bary)
-        normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [N, 3]
 
-        radiance = (irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]).reshape(-1, num_lights * 3)
+        radiance = irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]  # [N, K, 3]
         if self.config.specular:
-            positions = _interpolate(mesh.vertices, corners, bary)  # [N, 3]
-            lit = _specular(positions, normals, roughness, camera, coeffs, bands)  # [N, K*3]
+            lit = _specular(pixel_values[3], normals, roughness, camera, coeffs, bands)  # [N, K*3]
             if visibility is not None:
-                lit = lit * _interpolate(visibility[:, None], corners, bary)
-            radiance = radiance + (lit.reshape(-1, num_lights, 3) * specular[:, None]).reshape(-1, num_lights * 3)
-
-        depth = _interpolate(camera.to_camera(mesh.vertices)[:, 2:], corners, bary)  # [N, 1]
+                lit = lit * pixel_values[4]
+            radiance = radiance + lit.reshape(-1, num_lights, 3) * specular[:, None]
+        radiance = radiance.reshape(-1, num_lights * 3)
 
         def screen(values: torch.Tensor) -> torch.Tensor:  # [N, C] -> [H, W, C], zeros elsewhere
             full = torch.zeros(height * width, values.shape[1], dtype=values.dtype, device=values.device)
@@ -248,6 +244,36 @@ class Renderer:
         elif not self.config.shadows:
             transfer = None
         return self.shade(mesh, camera, self.rasterize(mesh, camera), textures, sh_lights, transfer)
+
+
+def vertex_irradiance(
+    mesh: Mesh, sh_lights: torch.Tensor, transfer: ShadowTransfer | None = None
+) -> torch.Tensor:
+    """Per-vertex SH irradiance [V, K, 3]: analytic unshadowed term minus the occluded transfer (if given).
+
+    E_v = sum_lm A_l c_lm Y_lm(n_v) - sum_lm c_lm O_v[lm]; Lambertian radiance is albedo / pi * E.
+    """
+    bands = _bands_of(sh_lights)
+    num_lights = sh_lights.shape[0]
+    coeffs = sh_lights.permute(1, 0, 2).reshape(bands * bands, num_lights * 3)
+    normals = mesh.vertex_normals().to(sh_lights.dtype)
+    return _vertex_irradiance(normals, coeffs, bands, transfer).reshape(-1, num_lights, 3)
+
+
+def _vertex_irradiance(
+    normals: torch.Tensor, coeffs: torch.Tensor, bands: int, transfer: ShadowTransfer | None
+) -> torch.Tensor:
+    """normals [V, 3], coeffs [B², K*3] -> irradiance [V, K*3]."""
+    lobe = cosine_lobe_coefficients(bands).to(device=coeffs.device, dtype=coeffs.dtype)
+    transfer_v = sh_basis(normals, bands) * lobe  # [V, B²]
+    if transfer is not None:
+        if transfer.bands < bands or transfer.occluded.shape[0] != normals.shape[0]:
+            raise ValueError(
+                f"shadow transfer has {transfer.bands} bands for {transfer.occluded.shape[0]} vertices, "
+                f"need >= {bands} bands for {normals.shape[0]}"
+            )
+        transfer_v = transfer_v - transfer.occluded[:, : bands * bands].to(coeffs.dtype)
+    return transfer_v @ coeffs
 
 
 class ShadowTransferCache:
@@ -301,17 +327,41 @@ def _specular(
     return (basis * lobe.to(coeffs.dtype)).T @ coeffs
 
 
+def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor) -> torch.Tensor:
+    """Perspective-correct barycentrics [N, 3] of the pixel centres ``covered`` in triangles ``tri``."""
+    pixels, depth = camera.project(mesh.vertices)  # [V, 2], [V]
+    corners = mesh.triangles[tri]  # [N, 3]
+    flat = corners.reshape(-1)
+    p = pixels.index_select(0, flat).reshape(-1, 3, 2)  # [N, 3, 2]
+    z = depth.index_select(0, flat).reshape(-1, 3)  # [N, 3]
+    width = camera.width
+    q = torch.stack([covered % width, covered // width], -1).to(p.dtype) + 0.5  # [N, 2]
+
+    def cross2(a, b):
+        return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+    d0, d1, d2 = p[:, 0] - q, p[:, 1] - q, p[:, 2] - q
+    screen = torch.stack([cross2(d1, d2), cross2(d2, d0), cross2(d0, d1)], -1)  # [N, 3] ~ 2 x areas
+    area = screen.sum(-1, keepdim=True)
+    tiny = torch.finfo(p.dtype).tiny
+    area = torch.where(area.abs() < tiny, torch.full_like(area, tiny), area)
+    weights = screen / area / z  # perspective correction: screen barycentrics / depth
+    return weights / weights.sum(-1, keepdim=True)
+
+
 def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
     """sum_i bary_i values[corners_i]: values [V, C], corners [N, 3], bary [N, 3] -> [N, C]."""
-    out = values[corners[:, 0]] * bary[:, :1]
-    out = out + values[corners[:, 1]] * bary[:, 1:2]
-    return out + values[corners[:, 2]] * bary[:, 2:3]
+    out = values.index_select(0, corners[:, 0]) * bary[:, :1]
+    out = out + values.index_select(0, corners[:, 1]) * bary[:, 1:2]
+    return out + values.index_select(0, corners[:, 2]) * bary[:, 2:3]
 
 
 def _pixel_rays(camera: Camera, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Model-frame rays through pixel positions (x right, y down): origins [N, 3], unit directions [N, 3]."""
     focal = float(camera.focal)
-    dirs_cam = np.stack([(xs - camera.width / 2) / focal, (ys - camera.height / 2) / focal, np.ones_like(xs)], -1)
+    dirs_cam = np.stack(
+        [(xs - camera.width / 2) / focal, (ys - camera.height / 2) / focal, np.ones_like(xs)], -1
+    )
     rot = camera.rotation_matrix.detach().double().cpu().numpy()
     dirs = dirs_cam @ rot  # camera -> model: R^T d
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)

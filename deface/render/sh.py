@@ -39,70 +39,120 @@ def _recurrence_constants(bands: int) -> tuple[list[float], list[tuple[list[floa
 
 
 def sh_basis(directions: torch.Tensor, bands: int) -> torch.Tensor:
-    """Real orthonormal SH basis at unit ``directions`` [..., 3] -> [..., bands²] (index l*l + l + m)."""
+    """Real orthonormal SH basis at unit ``directions`` [..., 3] -> [..., bands²] (index l*l + l + m).
+
+    Differentiable once (analytic backward, see :class:`_SHBasis`).
+    """
     if directions.shape[-1] != 3:
         raise ValueError(f"sh_basis: directions must have shape [..., 3], got {tuple(directions.shape)}")
-    rows = _ContiguousGrad.apply(sh_basis_rows(directions.reshape(-1, 3), bands))  # [B², N]
+    rows = sh_basis_rows(directions.reshape(-1, 3), bands)  # [B², N]; backward makes grads contiguous
     return rows.T.reshape(*directions.shape[:-1], bands * bands)
 
 
-class _ContiguousGrad(torch.autograd.Function):
-    """Identity whose backward makes the incoming gradient contiguous: the transposed gradient of
-    ``sh_basis`` would otherwise make every op of the recurrence's backward strided (5x slower)."""
-
-    @staticmethod
-    def forward(ctx, tensor: torch.Tensor) -> torch.Tensor:
-        return tensor.view_as(tensor)
-
-    @staticmethod
-    def backward(ctx, grad: torch.Tensor) -> torch.Tensor:
-        return grad.contiguous()
-
-
 def sh_basis_rows(directions: torch.Tensor, bands: int) -> torch.Tensor:
-    """SH basis channel-first: unit directions [N, 3] -> [bands², N].
+    """SH basis channel-first: unit directions [N, 3] -> [bands², N]; same values as :func:`sh_basis`.
 
-    Same values as :func:`sh_basis`; every intermediate is a contiguous [m, N] block, which makes the
-    forward and the backward pass several times faster than a channel-last layout.
+    Every intermediate is a contiguous [m, N] block, and the backward pass is analytic (derivative
+    recurrences) instead of autograd over ~100 small ops: both several times faster.
     """
     if directions.ndim != 2 or directions.shape[1] != 3:
         raise ValueError(f"sh_basis_rows: directions must be [N, 3], got {tuple(directions.shape)}")
     if bands < 1:
         raise ValueError(f"sh_basis: bands must be >= 1, got {bands}")
-    x, y, z = directions.T.contiguous()  # [N] each
-    diagonal, recurrence = _recurrence_constants(bands)
-    opts = {"dtype": directions.dtype, "device": directions.device}
+    return _SHBasis.apply(directions, bands)
 
-    # (x + i y)^m = sin^m(theta) (cos m phi + i sin m phi), m = 0..bands-1.
+
+def _legendre_rows(z: torch.Tensor, bands: int, derivative: bool):
+    """Q_l^m(z) = N_lm P_l^m(z) / sin^m(theta) for each band l as [l+1, N] blocks (and dQ/dz if asked).
+
+    Fully normalised recurrence (Holmes & Featherstone 2002) with the sin^m factor taken out:
+    Q_m^m = sqrt((2m+1)/(2m)) Q_{m-1}^{m-1} (a constant), Q_{m+1}^m = sqrt(2m+3) z Q_m^m,
+    Q_l^m = a_lm (z Q_{l-1}^m - b_lm Q_{l-2}^m).
+    """
+    diagonal, recurrence = _recurrence_constants(bands)
+    opts = {"dtype": z.dtype, "device": z.device}
+    q_rows = [torch.full_like(z, diagonal[0])[None]]
+    dq_rows = [torch.zeros_like(z)[None]]
+    for l in range(1, bands):  # noqa: E741 - l is the band index in every SH paper
+        parts, dparts = [], []
+        if l >= 2:
+            a = torch.tensor(recurrence[l][0], **opts)[:, None]
+            b = torch.tensor(recurrence[l][1], **opts)[:, None]
+            q1, q2 = q_rows[l - 1][: l - 1], q_rows[l - 2][: l - 1]
+            parts.append(a * (z * q1 - b * q2))  # m = 0..l-2
+            if derivative:
+                dparts.append(a * (q1 + z * dq_rows[l - 1][: l - 1] - b * dq_rows[l - 2][: l - 1]))
+        root = math.sqrt(2 * l + 1)
+        parts.append(root * z * q_rows[l - 1][l - 1 :])  # m = l-1
+        parts.append(torch.full_like(z, diagonal[l])[None])  # m = l
+        q_rows.append(torch.cat(parts))
+        if derivative:
+            dparts.append(root * q_rows[l - 1][l - 1 :])  # Q_{l-1}^{l-1} is constant
+            dparts.append(torch.zeros_like(z)[None])
+            dq_rows.append(torch.cat(dparts))
+    return q_rows, dq_rows
+
+
+def _azimuth_rows(x: torch.Tensor, y: torch.Tensor, bands: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Re and Im of (x + i y)^m = sin^m(theta) (cos m phi, sin m phi), m = 0..bands-1 -> [B, N] each."""
     cos_m, sin_m = [torch.ones_like(x)], [torch.zeros_like(x)]
     for _ in range(1, bands):
         c, s = cos_m[-1], sin_m[-1]
         cos_m.append(c * x - s * y)
         sin_m.append(s * x + c * y)
-    cos_stack = torch.stack(cos_m)  # [B, N]
-    sin_stack = torch.stack(sin_m)  # [B, N]
+    return torch.stack(cos_m), torch.stack(sin_m)
 
-    # Q rows: q_rows[l] holds Q_l^m for m = 0..l ([l+1, N]), all orders of a band at once.
-    q_rows = [torch.full_like(z, diagonal[0])[None]]
-    out = [q_rows[0]]
-    for l in range(1, bands):  # noqa: E741 - l is the band index in every SH paper
-        parts = []
-        if l >= 2:
-            a = torch.tensor(recurrence[l][0], **opts)[:, None]
-            b = torch.tensor(recurrence[l][1], **opts)[:, None]
-            parts.append(a * (z * q_rows[l - 1][: l - 1] - b * q_rows[l - 2][: l - 1]))  # m = 0..l-2
-        parts.append(math.sqrt(2 * l + 1) * z * q_rows[l - 1][l - 1 :])  # m = l-1
-        parts.append(torch.full_like(z, diagonal[l])[None])  # m = l
-        q = torch.cat(parts)  # [l+1, N]
-        q_rows.append(q)
-        scaled = math.sqrt(2.0) * q[1:]  # [l, N] for |m| = 1..l
-        out += [(scaled * sin_stack[1 : l + 1]).flip(0), q[:1], scaled * cos_stack[1 : l + 1]]
-    return torch.cat(out)
+
+class _SHBasis(torch.autograd.Function):
+    """Y [B², N] from directions [N, 3]; backward contracts the analytic Jacobian.
+
+    With Y_lm = sqrt2 Q C_m, Y_l-m = sqrt2 Q S_m (C + iS = (x + iy)^m):
+    dC_m/dx = m C_{m-1}, dC_m/dy = -m S_{m-1}, dS_m/dx = m S_{m-1}, dS_m/dy = m C_{m-1}, and dQ/dz from
+    the differentiated recurrence. These are derivatives of the polynomial in R^3, as autograd would give.
+    """
+
+    @staticmethod
+    def forward(ctx, directions: torch.Tensor, bands: int) -> torch.Tensor:
+        ctx.bands = bands
+        ctx.save_for_backward(directions)
+        x, y, z = directions.T.contiguous()
+        cos_stack, sin_stack = _azimuth_rows(x, y, bands)
+        q_rows, _ = _legendre_rows(z, bands, derivative=False)
+        cos_stack, sin_stack = math.sqrt(2.0) * cos_stack, math.sqrt(2.0) * sin_stack
+        out = [q_rows[0]]
+        for l in range(1, bands):  # noqa: E741
+            q = q_rows[l]
+            out += [(q[1:] * sin_stack[1 : l + 1]).flip(0), q[:1], q[1:] * cos_stack[1 : l + 1]]
+        return torch.cat(out)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        (directions,) = ctx.saved_tensors
+        bands = ctx.bands
+        x, y, z = directions.T.contiguous()
+        cos_stack, sin_stack = _azimuth_rows(x, y, bands)
+        q_rows, dq_rows = _legendre_rows(z, bands, derivative=True)
+        grad = grad.contiguous()
+        gx, gy, gz = torch.zeros_like(x), torch.zeros_like(x), torch.zeros_like(x)
+        root2 = math.sqrt(2.0)
+        for l in range(1, bands):  # noqa: E741
+            centre = l * l + l
+            g_pos = grad[centre + 1 : centre + l + 1]  # [l, N], m = 1..l
+            g_neg = grad[centre - l : centre].flip(0)  # [l, N], |m| = 1..l
+            m = torch.arange(1, l + 1, dtype=x.dtype, device=x.device)[:, None]
+            mq = root2 * m * q_rows[l][1:]  # [l, N]
+            c_prev, s_prev = cos_stack[:l], sin_stack[:l]
+            gx = gx + (mq * (g_pos * c_prev + g_neg * s_prev)).sum(0)
+            gy = gy + (mq * (g_neg * c_prev - g_pos * s_prev)).sum(0)
+            radial = g_pos * cos_stack[1 : l + 1] + g_neg * sin_stack[1 : l + 1]
+            gz = gz + grad[centre] * dq_rows[l][0] + root2 * (dq_rows[l][1:] * radial).sum(0)
+        return torch.stack([gx, gy, gz], -1), None
 
 
 def band_of_index(bands: int, device: torch.device | None = None) -> torch.Tensor:
     """Band l of every coefficient index [bands²] (long)."""
-    return torch.repeat_interleave(torch.arange(bands, device=device), 2 * torch.arange(bands, device=device) + 1)
+    levels = torch.arange(bands, device=device)
+    return torch.repeat_interleave(levels, 2 * levels + 1)
 
 
 def cosine_lobe_band(l: int) -> float:  # noqa: E741
