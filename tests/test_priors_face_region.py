@@ -1,0 +1,117 @@
+"""The face-region classifier h: skin-colour model (synthetic + a real shadowed photo) and BiSeNet."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from deface.priors.bisenet import FACE_CLASSES, BiSeNet, BiSeNetFaceParser, MissingWeightsError, parsing_box
+from deface.priors.face_region import SkinColourClassifier, _hull_mask, load_face_region_classifier
+
+SKIN = np.array([0.85, 0.64, 0.53])
+HAIR = np.array([0.30, 0.20, 0.10])
+BACKGROUND = np.array([0.2, 0.6, 0.3])
+
+
+def synthetic_face(seed: int = 0):
+    """96x96: skin disk with a dark shadow band (rows 52-62) and a hair band (rows 18-28) inside it."""
+    rng = np.random.default_rng(seed)
+    size = 96
+    ys, xs = np.mgrid[:size, :size]
+    disk = (ys - 48) ** 2 + (xs - 48) ** 2 <= 40**2
+    linear = np.where(disk[..., None], SKIN**2.2, BACKGROUND**2.2)
+    shadow = disk & (ys >= 52) & (ys < 62)
+    linear[shadow] *= np.array([0.22, 0.23, 0.26])  # darker and slightly bluer (sky-lit shadow)
+    hair = disk & (ys >= 18) & (ys < 28)
+    linear[hair] = HAIR**2.2
+    srgb = np.clip(linear ** (1 / 2.2) + rng.normal(0, 0.01, linear.shape), 0, 1)
+    return srgb.astype(np.float32), disk.astype(np.float32), shadow, hair
+
+
+def test_skin_classifier_keeps_shadowed_skin_and_drops_hair():
+    image, coverage, shadow, hair = synthetic_face()
+    h = SkinColourClassifier()(image, coverage)
+    assert h.shape == (96, 96) and h.dtype == np.float32 and h.min() >= 0 and h.max() <= 1
+    lit = (coverage > 0) & ~shadow & ~hair
+    inner_shadow = shadow.copy()
+    inner_shadow[:, :20] = inner_shadow[:, 76:] = False  # away from the disk's rim
+    assert h[lit].mean() > 0.9
+    assert h[inner_shadow].mean() > 0.8
+    assert h[hair].mean() < 0.2
+    assert h[coverage == 0].max() == 0
+
+
+def test_skin_classifier_accepts_torch_and_feature_masks():
+    image, coverage, _, hair = synthetic_face(1)
+    features = np.zeros_like(coverage)
+    features[20:26, 40:56] = 1.0  # pretend the model projects a brow into the hair band
+    h = SkinColourClassifier()(torch.from_numpy(image), torch.from_numpy(coverage), features=features)
+    assert h[21:25, 42:54].mean() > 0.9
+    assert h[hair & (features == 0)].mean() < 0.3
+    with pytest.raises(ValueError):
+        SkinColourClassifier()(image, np.zeros((96, 96)))
+
+
+def _mediapipe_landmarks(image: np.ndarray) -> np.ndarray:
+    face_mesh = pytest.importorskip("mediapipe.python.solutions.face_mesh")
+    with face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1) as mesh:
+        result = mesh.process(image)
+    if not result.multi_face_landmarks:
+        pytest.skip("MediaPipe found no face")
+    height, width = image.shape[:2]
+    return np.array([[p.x * width, p.y * height] for p in result.multi_face_landmarks[0].landmark])
+
+
+def test_skin_classifier_on_a_real_shadowed_photo(photos):
+    import cv2
+    import imageio.v3 as iio
+
+    image = iio.imread(photos / "real-foliage-shadow-9177-004.png")[..., :3]
+    landmarks = _mediapipe_landmarks(image)
+    hull = _hull_mask(landmarks, image.shape[:2])
+    h = SkinColourClassifier()(image / 255.0, hull.astype(np.float32), landmarks)
+    assert (h[hull] > 0.5).mean() > 0.9  # the half-shadowed face counts as face
+    # a coverage spilling 30 px past the face: the green foliage it takes in is rejected
+    grown = cv2.dilate(hull.astype(np.uint8), np.ones((61, 61), np.uint8)).astype(bool)
+    h_grown = SkinColourClassifier()(image / 255.0, grown.astype(np.float32))
+    foliage = grown & ~hull & (image[..., 1].astype(int) > image[..., 0].astype(int) + 10)
+    assert foliage.sum() > 500
+    assert (h_grown[foliage] > 0.5).mean() < 0.1
+    assert (h_grown[hull] > 0.5).mean() > 0.85
+
+
+def test_bisenet_shapes_and_state_dict_round_trip(tmp_path):
+    torch.manual_seed(0)
+    network = BiSeNet(19).eval()
+    state = network.state_dict()
+    assert state["cp.resnet.layer4.0.downsample.0.weight"].shape == (512, 256, 1, 1)
+    assert state["ffm.conv1.weight"].shape == (64, 256, 1, 1)
+    assert state["conv_out.conv_out.weight"].shape == (19, 256, 1, 1)
+    assert state["conv_out16.conv_out.weight"].shape == (19, 64, 1, 1)
+    assert state["cp.arm32.conv.conv.weight"].shape == (128, 512, 3, 3)
+    with torch.no_grad():
+        outputs = network(torch.randn(1, 3, 64, 64))
+    assert [tuple(o.shape) for o in outputs] == [(1, 19, 64, 64)] * 3
+    path = tmp_path / "79999_iter.pth"
+    torch.save(state, path)
+    parser = BiSeNetFaceParser(path, input_size=128)
+    loaded = parser.network.state_dict()
+    for key, value in state.items():
+        assert torch.equal(loaded[key], value), key
+    image = np.random.default_rng(0).random((90, 70, 3)).astype(np.float32)
+    h = parser(image, None, np.array([[20.0, 30.0], [50.0, 70.0]]))
+    top, left, bottom, right = parsing_box(np.array([[20.0, 30.0], [50.0, 70.0]]), (90, 70))
+    assert (top, left, bottom, right) == (25, 18, 75, 52)
+    assert h.shape == (90, 70) and h.min() >= 0 and h.max() <= 1
+    assert h[:top].max() == 0 and h[top:bottom, left:right].min() > 0
+    assert len(FACE_CLASSES) == 9
+
+
+def test_bisenet_missing_checkpoint(tmp_path, monkeypatch):
+    monkeypatch.setenv("DEFACE_MODELS", str(tmp_path))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    with pytest.raises(MissingWeightsError, match="79999_iter.pth"):
+        BiSeNetFaceParser(tmp_path / "79999_iter.pth")
+    classifier, description = load_face_region_classifier(tmp_path)
+    assert isinstance(classifier, SkinColourClassifier) and "BiSeNet off" in description
