@@ -40,12 +40,17 @@ def test_deterministic(ict, prior):
 
 
 def test_in_range(prior):
-    for mean, basis in ((prior.diffuse_mean, prior.diffuse_basis), (prior.specular_mean, prior.specular_basis)):
+    for mean, basis in (
+        (prior.diffuse_mean, prior.diffuse_basis),
+        (prior.specular_mean, prior.specular_basis),
+    ):
         std = np.sqrt((basis.astype(np.float64) ** 2).sum(0))
         assert (mean - 3 * std).min() >= 0.02 - 1e-6 and (mean + 3 * std).max() <= 0.95 + 1e-6
     # Random N(0, 1) draws stay in range and vary plausibly (not a constant model).
     rng = np.random.default_rng(0)
-    maps = [prior.textures(torch.tensor(rng.standard_normal(prior.num_coeffs)), 128)[0].numpy() for _ in range(50)]
+    maps = [
+        prior.textures(torch.tensor(rng.standard_normal(prior.num_coeffs)), 128)[0].numpy() for _ in range(50)
+    ]
     maps = np.stack(maps)
     assert maps.min() >= 0.02 and maps.max() <= 0.95
     face_mean = maps.mean((1, 2))  # [50, 3]
@@ -93,8 +98,14 @@ def test_left_right_symmetric_on_the_mesh(ict, prior):
 
 def test_asymmetric_option_breaks_symmetry(ict):
     geo = load_ict_geometry()
-    asym = build_albedo_prior(geo.uvs, geo.triangle_uvs, geo.triangles, geo.mean_shape, geo.landmarks_68,
-                              AlbedoPriorConfig(symmetric=False))
+    asym = build_albedo_prior(
+        geo.uvs,
+        geo.triangle_uvs,
+        geo.triangles,
+        geo.mean_shape,
+        geo.landmarks_68,
+        AlbedoPriorConfig(symmetric=False),
+    )
     odd = [i for i, n in enumerate(asym.component_names) if ":odd" in n]
     assert odd
     b = asym.diffuse_basis[odd[0]]

@@ -15,7 +15,7 @@ from deface.paths import ModelFileError
 
 
 def _grid_face(n: int = 9):
-    """A curved face-like grid (mm), +z toward the viewer; triangles wound clockwise (to test re-orienting)."""
+    """A curved face-like grid (mm), +z toward the viewer; triangles wound clockwise (tests re-orienting)."""
     xs, ys = np.meshgrid(np.linspace(-70, 70, n), np.linspace(-90, 90, n))
     zs = 60.0 * np.cos(xs / 90.0) + 20.0
     verts = np.stack([xs, ys, zs], -1).reshape(-1, 3)
@@ -60,7 +60,11 @@ def test_round_trip(bfm_dir):
     model = load_bfm(path, BFMConfig(texture_size=64))
     assert model.name == "bfm" and model.expression_prior == "pca"
     assert np.allclose(model.mean_shape, verts * 0.1, atol=1e-4)  # mm -> cm
-    assert model.identity_basis.shape == (7, len(verts), 3) and model.expression_basis.shape == (5, len(verts), 3)
+    assert model.identity_basis.shape == (7, len(verts), 3) and model.expression_basis.shape == (
+        5,
+        len(verts),
+        3,
+    )
     # N(0, 1) coefficients: each component's basis has norm sqrt(variance) (in cm).
     norms = np.linalg.norm(model.identity_basis.reshape(7, -1), axis=1)
     assert np.allclose(norms, np.sqrt(np.linspace(400.0, 10.0, 7)) * 0.1, rtol=1e-4)

@@ -31,9 +31,13 @@ def test_registry_entries_are_complete():
     keys = [e.key for e in registry.MODEL_FILES]
     assert len(keys) == len(set(keys))
     paths = {e.relative_path for e in registry.MODEL_FILES}
-    assert {"bfm2017/model2017-1_face12_nomouth.h5", "albedomm/albedoModel2020_face12_albedoPart.h5",
-            "facenet/20180402-114759-vggface2.pt", "face-parsing/79999_iter.pth",
-            "ict-facekit/ict_face_area_v9409_f16.npz"} <= paths
+    assert {
+        "bfm2017/model2017-1_face12_nomouth.h5",
+        "albedomm/albedoModel2020_face12_albedoPart.h5",
+        "facenet/20180402-114759-vggface2.pt",
+        "face-parsing/79999_iter.pth",
+        "ict-facekit/ict_face_area_v9409_f16.npz",
+    } <= paths
     assert registry.model_file("ict").required and registry.model_file("ict").sha256
     assert [e.key for e in registry.select(["bfm"])] == ["bfm2017", "albedomm"]
 
@@ -81,8 +85,19 @@ def test_check_detects_corrupt_file(monkeypatch, tmp_path):
 def test_fetch_offline_message(monkeypatch, tmp_path):
     _isolate(monkeypatch, tmp_path)
     result = runner.invoke(
-        _app(), ["models", "fetch", "ict", "--url", "http://127.0.0.1:9/", "--timeout", "2",
-                 "--models", str(tmp_path / "m")])
+        _app(),
+        [
+            "models",
+            "fetch",
+            "ict",
+            "--url",
+            "http://127.0.0.1:9/",
+            "--timeout",
+            "2",
+            "--models",
+            str(tmp_path / "m"),
+        ],
+    )
     assert result.exit_code == 1
     assert "cannot download http://127.0.0.1:9/" in result.output
     assert "deface models build ict --from" in result.output
@@ -92,5 +107,7 @@ def test_fetch_offline_message(monkeypatch, tmp_path):
 def test_build_from_sample_needs_complete_set(monkeypatch, tmp_path, shared):
     _isolate(monkeypatch, tmp_path)
     raw = shared / "models" / "ict-facekit" / "raw-sample"
-    result = runner.invoke(_app(), ["models", "build", "ict", "--from", str(raw), "--models", str(tmp_path / "m")])
+    result = runner.invoke(
+        _app(), ["models", "build", "ict", "--from", str(raw), "--models", str(tmp_path / "m")]
+    )
     assert result.exit_code == 1 and "identity OBJs missing" in result.output

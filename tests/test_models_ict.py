@@ -24,7 +24,7 @@ def test_shapes_and_units(ict):
     # Centimetres: an adult face area is ~15-25 cm wide and tall (it would be ~150+ in mm, ~0.2 in m).
     extent = np.ptp(ict.mean_shape, axis=0)
     assert 12 < extent[0] < 25 and 20 < extent[1] < 40
-    # Left-right: landmark 36 (subject's right eye corner) has x < 0, 45 (left) x > 0; chin (8) below nose (30).
+    # Landmark 36 (subject's right eye corner) has x < 0, 45 (left) x > 0; chin (8) below nose (30).
     lm = ict.mean_shape[ict.landmarks_68]
     assert lm[36, 0] < 0 < lm[45, 0] and lm[8, 1] < lm[30, 1] and lm[30, 2] > lm[0, 2]
 
@@ -98,8 +98,10 @@ def test_builder_complete_mode_reports_missing(shared):
 
 def test_read_obj_triangles_and_quads(tmp_path):
     obj = tmp_path / "m.obj"
-    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
-                   "f 1/1 2/2 3/3 4/4\nf 1/1 3/3 4/4\n")
+    obj.write_text(
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+        "f 1/1 2/2 3/3 4/4\nf 1/1 3/3 4/4\n"
+    )
     data = read_obj(obj)
     assert data["faces_v"].tolist() == [[0, 1, 2, 3], [0, 2, 3, -1]]
     assert data["faces_uv"].tolist() == [[0, 1, 2, 3], [0, 2, 3, -1]]

@@ -17,7 +17,11 @@ err_console = Console(stderr=True)
 
 models_app = typer.Typer(no_args_is_help=True, help="Face-model files: list, check, build, fetch.")
 
-MODELS_OPTION = typer.Option(None, "--models", help="Models directory (else DEFACE_MODELS, else the user cache).")
+NAMES_ARGUMENT = typer.Argument(None, help="Keys or groups to require (e.g. bfm); default: all.")
+FROM_OPTION = typer.Option(..., "--from", help="ICT-FaceKit checkout (or its FaceXModel folder).")
+MODELS_OPTION = typer.Option(
+    None, "--models", help="Models directory (else DEFACE_MODELS, else the user cache)."
+)
 
 
 def register(app: typer.Typer) -> None:
@@ -45,8 +49,14 @@ def _table(statuses: list[registry.FileStatus], show_checksum: bool) -> Table:
         table.add_column("sha256")
     for st in statuses:
         found = f"[green]found[/green] {st.path}" if st.path else f"[red]missing[/red] -> {st.target}"
-        row = [st.entry.key, st.entry.relative_path, found, "yes" if st.entry.required else "optional",
-               st.entry.licence, st.entry.source]
+        row = [
+            st.entry.key,
+            st.entry.relative_path,
+            found,
+            "yes" if st.entry.required else "optional",
+            st.entry.licence,
+            st.entry.source,
+        ]
         if show_checksum:
             row.append(st.checksum)
         table.add_row(*row)
@@ -63,7 +73,7 @@ def list_files(models: Path | None = MODELS_OPTION) -> None:
 
 @models_app.command("check")
 def check(
-    names: list[str] | None = typer.Argument(None, help="Keys or groups to require (e.g. bfm); default: all."),
+    names: list[str] | None = NAMES_ARGUMENT,
     models: Path | None = MODELS_OPTION,
 ) -> None:
     """Verify files and checksums; exit 1 when a required (or named) file is missing or corrupt."""
@@ -83,7 +93,7 @@ def check(
 @models_app.command("build")
 def build(
     name: str = typer.Argument(..., help="What to build: ict."),
-    source: Path = typer.Option(..., "--from", help="ICT-FaceKit checkout (or its FaceXModel folder)."),
+    source: Path = FROM_OPTION,
     models: Path | None = MODELS_OPTION,
 ) -> None:
     """Build a model pack from upstream files (ict: the face-area npz from ICT-FaceKit's OBJs)."""
@@ -113,15 +123,25 @@ def fetch(
         entry = next((e for e in registry.MODEL_FILES if e.key == name or e.group == name), None)
         hint = f"; get it manually: {entry.source}" if entry else ""
         _fail(f"'{name}' cannot be fetched automatically (licence/registration){hint}")
-    from deface.models.ict_build import UPSTREAM_ZIP_URL, BuildError, FetchError, build_ict_pack, fetch_upstream
-    from deface.models.ict_build import save_pack
+    from deface.models.ict_build import (
+        UPSTREAM_ZIP_URL,
+        BuildError,
+        FetchError,
+        build_ict_pack,
+        fetch_upstream,
+        save_pack,
+    )
 
     target = models_dir_candidates(models)[0] / registry.model_file("ict").relative_path
     target.parent.mkdir(parents=True, exist_ok=True)
     try:
         with tempfile.TemporaryDirectory(dir=target.parent) as tmp, console.status("downloading") as spinner:
-            obj_dir = fetch_upstream(tmp, url or UPSTREAM_ZIP_URL, timeout,
-                                     progress=lambda n: spinner.update(f"downloading: {n / 1e6:.0f} MB"))
+            obj_dir = fetch_upstream(
+                tmp,
+                url or UPSTREAM_ZIP_URL,
+                timeout,
+                progress=lambda n: spinner.update(f"downloading: {n / 1e6:.0f} MB"),
+            )
             spinner.update("building the face-area pack")
             save_pack(build_ict_pack(obj_dir), target)
     except (FetchError, BuildError) as error:

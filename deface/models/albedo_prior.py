@@ -17,7 +17,7 @@ Numbers (linear reflectance):
 - Specular: 0.04-0.08 with the T-zone highest, following the regional specular analysis of Weyrich et al.,
   "Analysis of Human Faces using a Measurement-Based Skin Reflectance Model", SIGGRAPH 2006 (forehead and nose
   are the most specular regions); the Fresnel reflectance of skin at normal incidence (n ~ 1.4) is ~0.028.
-- Roughness default 0.4: in the range of the per-region Torrance-Sparrow roughness fits of Weyrich et al. 2006.
+- Roughness default 0.4: within the per-region Torrance-Sparrow roughness fits of Weyrich et al. 2006.
 Region tints and variation amplitudes are this project's design choices (documented in docs/albedo-prior.md).
 """
 
@@ -91,7 +91,7 @@ class AlbedoPriorConfig:
     symmetric: bool = True
     """Left-right symmetric basis; False adds odd-in-u components (sin(pi (u - 0.5)) cos(pi b v))."""
     range_sigmas: float = 3.0
-    """Mean +- this many per-texel stds stays within [min_albedo, max_albedo] (basis is scaled down if not)."""
+    """Mean +- this many per-texel stds stays in [min_albedo, max_albedo] (else the basis is scaled down)."""
     min_albedo: float = 0.02
     max_albedo: float = 0.95
 
@@ -234,11 +234,18 @@ def mean_maps(masks: dict[str, np.ndarray], config: AlbedoPriorConfig) -> tuple[
         m = masks[name][..., None]
         return diffuse * (1.0 - m + m * np.asarray(factor))
 
-    for name, factor in (("neck", config.neck_tint), ("cheeks", config.cheek_tint), ("ears", config.ear_tint),
-                         ("eyes", config.eye_tint), ("lips", config.lip_tint)):
+    for name, factor in (
+        ("neck", config.neck_tint),
+        ("cheeks", config.cheek_tint),
+        ("ears", config.ear_tint),
+        ("eyes", config.eye_tint),
+        ("lips", config.lip_tint),
+    ):
         diffuse = tint(name, factor)
-    for name, colour, weight in (("brows", config.brow_rgb, config.brow_coverage),
-                                 ("nostrils", config.nostril_rgb, 1.0)):
+    for name, colour, weight in (
+        ("brows", config.brow_rgb, config.brow_coverage),
+        ("nostrils", config.nostril_rgb, 1.0),
+    ):
         m = weight * masks[name][..., None]
         diffuse = diffuse * (1.0 - m) + m * np.asarray(colour)
     spec = config.specular_skin + (config.specular_tzone - config.specular_skin) * masks["tzone"]
@@ -273,8 +280,12 @@ def spatial_functions(config: AlbedoPriorConfig, max_order: int, weights: np.nda
 
 
 def build_albedo_prior(
-    uvs: np.ndarray, triangle_uvs: np.ndarray, triangles: np.ndarray, vertices: np.ndarray,
-    landmarks_68: np.ndarray, config: AlbedoPriorConfig | None = None,
+    uvs: np.ndarray,
+    triangle_uvs: np.ndarray,
+    triangles: np.ndarray,
+    vertices: np.ndarray,
+    landmarks_68: np.ndarray,
+    config: AlbedoPriorConfig | None = None,
 ) -> AlbedoModel:
     """Build the prior for a mesh with a face UV layout (uvs [U, 2], triangle_uvs/triangles [F, 3],
     vertices [V, 3] cm, landmarks_68 [68] vertex ids). Deterministic."""
@@ -333,7 +344,9 @@ def _fit_range(mean: np.ndarray, basis: np.ndarray, config: AlbedoPriorConfig) -
     room = np.minimum(config.max_albedo - mean, mean - config.min_albedo)
     scale = min(1.0, float((room / reach).min()))
     if scale <= 0.0:
-        raise ValueError("albedo prior: the mean map leaves [min_albedo, max_albedo]; check the region colours")
+        raise ValueError(
+            "albedo prior: the mean map leaves [min_albedo, max_albedo]; check the region colours"
+        )
     return basis * scale
 
 

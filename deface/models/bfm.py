@@ -10,7 +10,7 @@ Files (not redistributable; see ``deface models list``):
 Conversions to the :class:`FaceModel` conventions:
 - millimetres -> centimetres (x 0.1); BFM's frame already has +y up, +z toward the viewer, +x to the subject's
   left.
-- N(0, 1) coefficients: statismo stores an orthonormal ``pcaBasis`` U with ``pcaVariance`` lambda, and NextFace
+- N(0, 1) coefficients: statismo stores an orthonormal ``pcaBasis`` U with ``pcaVariance`` lambda; NextFace
   multiplies its coefficients by U directly with a prior weighted by lambda (its coefficients ~ N(0, lambda)).
   We store U * sqrt(lambda) so our coefficients are N(0, 1). If a file's basis is already scaled (column norms
   squared ~ lambda), it is used as is. Which case applies is decided per basis from the column norms.
@@ -37,7 +37,9 @@ from deface.paths import ModelFileError, find_model_file
 BFM_FILE = "bfm2017/model2017-1_face12_nomouth.h5"
 ALBEDOMM_FILE = "albedomm/albedoModel2020_face12_albedoPart.h5"
 MM_TO_CM = 0.1
-ALBEDOMM_ROUGHNESS = 0.4  # AlbedoMM has no roughness model; same default as the ICT prior (Weyrich et al. 2006)
+ALBEDOMM_ROUGHNESS = (
+    0.4  # AlbedoMM has no roughness model; same default as the ICT prior (Weyrich et al. 2006)
+)
 
 
 @dataclass(frozen=True)
@@ -45,7 +47,7 @@ class BFMConfig:
     """Options of the BFM 2017 + AlbedoMM loader."""
 
     texture_size: int = 256
-    """Size of the UV albedo maps the per-vertex AlbedoMM model is splatted into (memory ~ 2*145*3*size^2*4 B)."""
+    """Size of the UV maps AlbedoMM is splatted into (memory ~ 2*145*3*size^2*4 bytes)."""
     uv_file: str | None = None
     """NextFace uvParametrization pickle or an OBJ with vt; None: cylindrical projection."""
     num_identity: int | None = None
@@ -59,7 +61,9 @@ class BFMConfig:
 def _require(relative: str, models_dir, what: str, where: str) -> Path:
     path = find_model_file(relative, models_dir)
     if path is None:
-        raise ModelFileError(f"{what} '{relative}' not found under --models/DEFACE_MODELS/cache; get it from {where}")
+        raise ModelFileError(
+            f"{what} '{relative}' not found under --models/DEFACE_MODELS/cache; get it from {where}"
+        )
     return path
 
 
@@ -70,7 +74,9 @@ def standard_normal_basis(basis: np.ndarray, variance: np.ndarray) -> np.ndarray
     norms2 = (basis.astype(np.float64) ** 2).sum(0)
     variance = np.maximum(variance.astype(np.float64), 1e-30)
     # Orthonormal columns have norm 1; pre-scaled columns have norm^2 = variance. Pick the closer in log.
-    orthonormal = np.median(np.abs(np.log(norms2 + 1e-30))) <= np.median(np.abs(np.log((norms2 + 1e-30) / variance)))
+    orthonormal = np.median(np.abs(np.log(norms2 + 1e-30))) <= np.median(
+        np.abs(np.log((norms2 + 1e-30) / variance))
+    )
     scaled = basis * np.sqrt(variance)[None, :] if orthonormal else basis
     return np.ascontiguousarray(scaled.T.reshape(basis.shape[1], -1, 3))
 
@@ -80,7 +86,7 @@ def orient_outward(triangles: np.ndarray, vertices: np.ndarray) -> np.ndarray:
     a, b, c = (vertices[triangles[:, i]] for i in range(3))
     normals = np.cross(b - a, c - a)
     centroid = vertices.mean(0)
-    outward = ((a + b + c) / 3.0 - centroid)
+    outward = (a + b + c) / 3.0 - centroid
     outward[:, 2] += np.ptp(vertices[:, 2])  # a face shell opens backwards: bias toward the viewer
     return triangles if (normals * outward).sum() >= 0 else triangles[:, [0, 2, 1]]
 
@@ -148,16 +154,29 @@ def splat_albedo(
 def load_bfm(models_dir: str | os.PathLike | None = None, config: BFMConfig | None = None) -> FaceModel:
     """BFM 2017 face12 geometry + AlbedoMM albedo, converted to the FaceModel conventions."""
     config = config or BFMConfig()
-    bfm_path = _require(BFM_FILE, models_dir, "Basel Face Model 2017",
-                        "https://faces.dmi.unibas.ch/bfm/bfm2017.html (registration)")
-    albedo_path = _require(ALBEDOMM_FILE, models_dir, "AlbedoMM",
-                           "https://github.com/waps101/AlbedoMM/releases")
+    bfm_path = _require(
+        BFM_FILE,
+        models_dir,
+        "Basel Face Model 2017",
+        "https://faces.dmi.unibas.ch/bfm/bfm2017.html (registration)",
+    )
+    albedo_path = _require(
+        ALBEDOMM_FILE, models_dir, "AlbedoMM", "https://github.com/waps101/AlbedoMM/releases"
+    )
     with h5py.File(bfm_path, "r") as bfm:
         mean = np.asarray(bfm["shape/model/mean"], np.float64).reshape(-1, 3) * MM_TO_CM
-        identity = standard_normal_basis(np.asarray(bfm["shape/model/pcaBasis"]),
-                                         np.asarray(bfm["shape/model/pcaVariance"])) * MM_TO_CM
-        expression = standard_normal_basis(np.asarray(bfm["expression/model/pcaBasis"]),
-                                           np.asarray(bfm["expression/model/pcaVariance"])) * MM_TO_CM
+        identity = (
+            standard_normal_basis(
+                np.asarray(bfm["shape/model/pcaBasis"]), np.asarray(bfm["shape/model/pcaVariance"])
+            )
+            * MM_TO_CM
+        )
+        expression = (
+            standard_normal_basis(
+                np.asarray(bfm["expression/model/pcaBasis"]), np.asarray(bfm["expression/model/pcaVariance"])
+            )
+            * MM_TO_CM
+        )
         cells = np.asarray(bfm["shape/representer/cells"], np.int64)
     triangles = cells.T if cells.shape[0] == 3 else cells
     if triangles.max() >= len(mean):
@@ -191,8 +210,10 @@ def _load_albedomm(path, num_vertices, triangles, uvs, triangle_uvs, config: BFM
             mean = np.asarray(albedo[f"{kind}/model/mean"], np.float64).reshape(-1, 3)
             if len(mean) != num_vertices:
                 raise ValueError(f"{path}: {kind} has {len(mean)} vertices, BFM has {num_vertices}")
-            basis = standard_normal_basis(np.asarray(albedo[f"{kind}/model/pcaBasis"])[:, : config.num_albedo],
-                                          np.asarray(albedo[f"{kind}/model/pcaVariance"])[: config.num_albedo])
+            basis = standard_normal_basis(
+                np.asarray(albedo[f"{kind}/model/pcaBasis"])[:, : config.num_albedo],
+                np.asarray(albedo[f"{kind}/model/pcaVariance"])[: config.num_albedo],
+            )
             vertex_uv_triangles = triangles  # per-vertex values follow the position triangles
             maps[kind] = splat_albedo(raster, vertex_uv_triangles, mean, basis)
     if maps["diffuseAlbedo"][1].shape[0] != maps["specularAlbedo"][1].shape[0]:
@@ -204,5 +225,5 @@ def _load_albedomm(path, num_vertices, triangles, uvs, triangle_uvs, config: BFM
         specular_basis=maps["specularAlbedo"][1],
         roughness_default=ALBEDOMM_ROUGHNESS,
         face_mask=coverage(uvs, triangle_uvs, config.texture_size, supersample=2),
-        description=f"AlbedoMM (Smith et al. 2020) per-vertex model splatted to {config.texture_size}^2 UV maps",
+        description=f"AlbedoMM (Smith et al. 2020) per-vertex model splatted to {config.texture_size}^2 UV",
     )

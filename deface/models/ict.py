@@ -1,4 +1,4 @@
-"""ICT-FaceKit (MIT), the embedded default face model: face area, 9,409 vertices, 100 identity + 53 expressions.
+"""ICT-FaceKit (MIT), the embedded default face model: face area, 9,409 vertices, 100 identity + 53 expr.
 
 The pack ``ict-facekit/ict_face_area_v9409_f16.npz`` is found through :mod:`deface.paths`
 (``--models DIR``, ``DEFACE_MODELS``, the user cache). Quads are split into two triangles each.
@@ -38,7 +38,8 @@ def _load_geometry(models_dir: str | None) -> FaceModel:
     if path is None:
         raise ModelFileError(
             f"ICT-FaceKit pack '{ICT_PACK}' not found; run `deface models fetch ict` (online) or "
-            "`deface models build ict --from <ICT-FaceKit checkout>`, or pass --models DIR / set DEFACE_MODELS"
+            "`deface models build ict --from <ICT-FaceKit checkout>`, or pass --models DIR / set "
+            "DEFACE_MODELS"
         )
     pack = np.load(path)
     return FaceModel(

@@ -12,7 +12,6 @@ import hashlib
 import io
 import json
 import shutil
-import socket
 import tempfile
 import urllib.error
 import urllib.request
@@ -31,23 +30,131 @@ UNITS_NOTE = "cm (ICT obj units); identity weights ~ N(0,1) per ICT sample_rando
 
 # Multi-PIE 68 landmark vertex ids, copied from the upstream README ("Facial Landmarks", 0-indexed).
 LANDMARKS_MULTIPIE68 = (
-    1225, 1888, 1052, 367, 1719, 1722, 2199, 1447, 966, 3661, 4390, 3927, 3924, 2608, 3272, 4088, 3443, 268,
-    493, 1914, 2044, 1401, 3615, 4240, 4114, 2734, 2509, 978, 4527, 4942, 4857, 1140, 2075, 1147, 4269, 3360,
-    1507, 1542, 1537, 1528, 1518, 1511, 3742, 3751, 3756, 3721, 3725, 3732, 5708, 5695, 2081, 0, 4275, 6200,
-    6213, 6346, 6461, 5518, 5957, 5841, 5702, 5711, 5533, 6216, 6207, 6470, 5517, 5966,
+    1225,
+    1888,
+    1052,
+    367,
+    1719,
+    1722,
+    2199,
+    1447,
+    966,
+    3661,
+    4390,
+    3927,
+    3924,
+    2608,
+    3272,
+    4088,
+    3443,
+    268,
+    493,
+    1914,
+    2044,
+    1401,
+    3615,
+    4240,
+    4114,
+    2734,
+    2509,
+    978,
+    4527,
+    4942,
+    4857,
+    1140,
+    2075,
+    1147,
+    4269,
+    3360,
+    1507,
+    1542,
+    1537,
+    1528,
+    1518,
+    1511,
+    3742,
+    3751,
+    3756,
+    3721,
+    3725,
+    3732,
+    5708,
+    5695,
+    2081,
+    0,
+    4275,
+    6200,
+    6213,
+    6346,
+    6461,
+    5518,
+    5957,
+    5841,
+    5702,
+    5711,
+    5533,
+    6216,
+    6207,
+    6470,
+    5517,
+    5966,
 )
 
 # The 53 ARKit-style expressions of ICT-FaceKit (upstream vertex_indices.json "expressions"), pack order.
 EXPRESSION_NAMES = (
-    "browDown_L", "browDown_R", "browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R",
-    "cheekPuff_L", "cheekPuff_R", "cheekSquint_L", "cheekSquint_R", "eyeBlink_L", "eyeBlink_R",
-    "eyeLookDown_L", "eyeLookDown_R", "eyeLookIn_L", "eyeLookIn_R", "eyeLookOut_L", "eyeLookOut_R",
-    "eyeLookUp_L", "eyeLookUp_R", "eyeSquint_L", "eyeSquint_R", "eyeWide_L", "eyeWide_R", "jawForward",
-    "jawLeft", "jawOpen", "jawRight", "mouthClose", "mouthDimple_L", "mouthDimple_R", "mouthFrown_L",
-    "mouthFrown_R", "mouthFunnel", "mouthLeft", "mouthLowerDown_L", "mouthLowerDown_R", "mouthPress_L",
-    "mouthPress_R", "mouthPucker", "mouthRight", "mouthRollLower", "mouthRollUpper", "mouthShrugLower",
-    "mouthShrugUpper", "mouthSmile_L", "mouthSmile_R", "mouthStretch_L", "mouthStretch_R", "mouthUpperUp_L",
-    "mouthUpperUp_R", "noseSneer_L", "noseSneer_R",
+    "browDown_L",
+    "browDown_R",
+    "browInnerUp_L",
+    "browInnerUp_R",
+    "browOuterUp_L",
+    "browOuterUp_R",
+    "cheekPuff_L",
+    "cheekPuff_R",
+    "cheekSquint_L",
+    "cheekSquint_R",
+    "eyeBlink_L",
+    "eyeBlink_R",
+    "eyeLookDown_L",
+    "eyeLookDown_R",
+    "eyeLookIn_L",
+    "eyeLookIn_R",
+    "eyeLookOut_L",
+    "eyeLookOut_R",
+    "eyeLookUp_L",
+    "eyeLookUp_R",
+    "eyeSquint_L",
+    "eyeSquint_R",
+    "eyeWide_L",
+    "eyeWide_R",
+    "jawForward",
+    "jawLeft",
+    "jawOpen",
+    "jawRight",
+    "mouthClose",
+    "mouthDimple_L",
+    "mouthDimple_R",
+    "mouthFrown_L",
+    "mouthFrown_R",
+    "mouthFunnel",
+    "mouthLeft",
+    "mouthLowerDown_L",
+    "mouthLowerDown_R",
+    "mouthPress_L",
+    "mouthPress_R",
+    "mouthPucker",
+    "mouthRight",
+    "mouthRollLower",
+    "mouthRollUpper",
+    "mouthShrugLower",
+    "mouthShrugUpper",
+    "mouthSmile_L",
+    "mouthSmile_R",
+    "mouthStretch_L",
+    "mouthStretch_R",
+    "mouthUpperUp_L",
+    "mouthUpperUp_R",
+    "noseSneer_L",
+    "noseSneer_R",
 )
 
 
@@ -71,15 +178,17 @@ def read_obj(path: Path, with_faces: bool = True) -> dict[str, np.ndarray]:
             elif with_faces and line.startswith("f "):
                 corners = line.split()[1:]
                 if len(corners) not in (3, 4):
-                    raise BuildError(f"{path}: only triangles and quads are supported, got {len(corners)} corners")
+                    raise BuildError(
+                        f"{path}: only triangles and quads are supported, got {len(corners)} corners"
+                    )
                 ids = [c.split("/") for c in corners] + [["0", "0"]] * (4 - len(corners))  # pads to -1
                 face_v.append([int(i[0]) - 1 for i in ids])
                 face_uv.append([int(i[1]) - 1 if len(i) > 1 and i[1] else -1 for i in ids])
     out = {"positions": np.array(" ".join(positions).split(), np.float64).reshape(-1, 3)}
     if uvs:
-        out["uv"] = np.array(" ".join(uvs).split(), np.float64).reshape(-1, 3 if len(uvs[0].split()) == 3 else 2)[
-            :, :2
-        ]
+        out["uv"] = np.array(" ".join(uvs).split(), np.float64).reshape(
+            -1, 3 if len(uvs[0].split()) == 3 else 2
+        )[:, :2]
     if with_faces:
         out["faces_v"] = np.array(face_v, np.int64).reshape(-1, 4)
         out["faces_uv"] = np.array(face_uv, np.int64).reshape(-1, 4)
@@ -91,7 +200,9 @@ def find_obj_dir(source: Path) -> Path:
     for candidate in (source, source / "FaceXModel"):
         if (candidate / NEUTRAL_OBJ).is_file():
             return candidate
-    raise BuildError(f"no {NEUTRAL_OBJ} in {source} or {source / 'FaceXModel'}; point --from at an ICT-FaceKit checkout")
+    raise BuildError(
+        f"no {NEUTRAL_OBJ} in {source} or {source / 'FaceXModel'}; point --from at an ICT-FaceKit checkout"
+    )
 
 
 def build_ict_pack(
@@ -106,15 +217,23 @@ def build_ict_pack(
     neutral_obj = read_obj(obj_dir / NEUTRAL_OBJ)
     neutral = neutral_obj["positions"]
     if len(neutral) < FACE_VERTICES or len(neutral_obj["faces_v"]) < FACE_FACES:
-        raise BuildError(f"{obj_dir / NEUTRAL_OBJ}: fewer vertices/faces than the ICT face area; not ICT-FaceKit?")
+        raise BuildError(
+            f"{obj_dir / NEUTRAL_OBJ}: fewer vertices/faces than the ICT face area; not ICT-FaceKit?"
+        )
     faces_v = neutral_obj["faces_v"][:FACE_FACES]
     faces_uv = neutral_obj["faces_uv"][:FACE_FACES]
     if faces_v.max() >= FACE_VERTICES:
-        raise BuildError("the first 9,230 faces use vertices beyond the face area; not the ICT-FaceKit topology")
+        raise BuildError(
+            "the first 9,230 faces use vertices beyond the face area; not the ICT-FaceKit topology"
+        )
     identity_names = [f"identity{i:03d}" for i in range(NUM_IDENTITIES)]
     expression_names = _expression_names(obj_dir)
-    arrays = {"neutral": neutral[:FACE_VERTICES].astype(np.float32), "uv": neutral_obj["uv"].astype(np.float32),
-              "faces_v": faces_v.astype(np.int32), "faces_uv": faces_uv.astype(np.int32)}
+    arrays = {
+        "neutral": neutral[:FACE_VERTICES].astype(np.float32),
+        "uv": neutral_obj["uv"].astype(np.float32),
+        "faces_v": faces_v.astype(np.int32),
+        "faces_uv": faces_uv.astype(np.int32),
+    }
     for kind, names in (("identity", identity_names), ("expression", expression_names)):
         present = [n for n in names if (obj_dir / f"{n}.obj").is_file()]
         missing = sorted(set(names) - set(present))
@@ -174,7 +293,9 @@ def content_sha256(path: str | Path) -> str:
 
 
 def fetch_upstream(
-    destination: str | Path, url: str = UPSTREAM_ZIP_URL, timeout: float = 10.0,
+    destination: str | Path,
+    url: str = UPSTREAM_ZIP_URL,
+    timeout: float = 10.0,
     progress: Callable[[int], None] | None = None,
 ) -> Path:
     """Download and unpack the upstream repository zip into ``destination``; returns the OBJ folder.
@@ -184,11 +305,12 @@ def fetch_upstream(
     destination = Path(destination)
     offline_help = (
         f"cannot download {url}: {{reason}}. Offline: on a machine with internet download "
-        f"{UPSTREAM_ZIP_URL}, unzip it, copy it here and run `deface models build ict --from <unzipped folder>`"
+        f"{UPSTREAM_ZIP_URL}, unzip it, copy it here and run "
+        "`deface models build ict --from <unzipped folder>`"
     )
     try:
         response = urllib.request.urlopen(url, timeout=timeout)  # noqa: S310 (a fixed https URL by default)
-    except (urllib.error.URLError, socket.timeout, OSError) as error:
+    except (TimeoutError, urllib.error.URLError, OSError) as error:
         reason = getattr(error, "reason", error)
         raise FetchError(offline_help.format(reason=reason)) from error
     destination.mkdir(parents=True, exist_ok=True)
@@ -202,11 +324,13 @@ def fetch_upstream(
                     done += len(chunk)
                     if progress:
                         progress(done)
-        except (OSError, socket.timeout) as error:
+        except (TimeoutError, OSError) as error:
             raise FetchError(offline_help.format(reason=f"download interrupted ({error})")) from error
         try:
             with zipfile.ZipFile(archive) as zipped:
-                members = [m for m in zipped.namelist() if "/FaceXModel/" in m and m.endswith((".obj", ".json"))]
+                members = [
+                    m for m in zipped.namelist() if "/FaceXModel/" in m and m.endswith((".obj", ".json"))
+                ]
                 if not members:
                     raise FetchError(f"{url} holds no FaceXModel/*.obj; is it the ICT-FaceKit repository?")
                 target = destination / "FaceXModel"

@@ -58,7 +58,7 @@ MODEL_FILES: tuple[ModelFile, ...] = (
         key="bfm2017",
         relative_path="bfm2017/model2017-1_face12_nomouth.h5",
         description="Basel Face Model 2017, face12 without mouth (shape + expression) for --face-model bfm",
-        source="register at https://faces.dmi.unibas.ch/bfm/bfm2017.html and download model2017-1_face12_nomouth.h5",
+        source="register at https://faces.dmi.unibas.ch/bfm/bfm2017.html; get model2017-1_face12_nomouth.h5",
         licence="BFM 2017 licence: non-commercial research, no redistribution",
         sha256=None,
         required=False,
@@ -87,8 +87,8 @@ MODEL_FILES: tuple[ModelFile, ...] = (
     ModelFile(
         key="face-parsing",
         relative_path="face-parsing/79999_iter.pth",
-        description="BiSeNet face parsing, 19 CelebAMask-HQ classes (segmentation loss / eval mask, optional)",
-        source="https://github.com/zllrunning/face-parsing.PyTorch (README: Google Drive link to 79999_iter.pth)",
+        description="BiSeNet face parsing, 19 CelebAMask-HQ classes (segmentation loss, eval mask; optional)",
+        source="https://github.com/zllrunning/face-parsing.PyTorch (README: Drive link to 79999_iter.pth)",
         licence="MIT code; weights trained on CelebAMask-HQ (non-commercial research)",
         sha256=None,
         required=False,
@@ -140,15 +140,19 @@ class FileStatus:
     def problem(self) -> str | None:
         """One-line, actionable description of what is wrong, or None."""
         if self.path is None:
-            return (f"missing {self.entry.relative_path} ({self.entry.description}); get it: {self.entry.source}; "
-                    f"put it at {self.target}")
+            return (
+                f"missing {self.entry.relative_path} ({self.entry.description}); "
+                f"get it: {self.entry.source}; "
+                f"put it at {self.target}"
+            )
         if self.checksum == "mismatch":
-            return f"checksum mismatch for {self.path}: expected sha256 {self.entry.sha256}; re-download or rebuild"
+            expected = self.entry.sha256
+            return f"checksum mismatch for {self.path}: expected sha256 {expected}; re-download or rebuild"
         return None
 
 
 def status(entry: ModelFile, models_dir: str | os.PathLike | None = None, verify: bool = False) -> FileStatus:
-    """Find ``entry`` and, with ``verify``, compare its SHA-256 (file bytes, or npz content) to the registry."""
+    """Find ``entry``; with ``verify`` compare its SHA-256 (file bytes, or npz content) to the registry."""
     path = find_model_file(entry.relative_path, models_dir)
     target = models_dir_candidates(models_dir)[0] / entry.relative_path
     if path is None:

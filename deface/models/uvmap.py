@@ -97,10 +97,14 @@ def _rasterize_group(ids, px, lo, bw, bh, triangle, bary) -> None:
     det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
     ok = np.abs(det) > 1e-12
     det = np.where(ok, det, 1.0)[:, None]
-    w1 = ((xs - a[:, 0, None]) * (c[:, 1, None] - a[:, 1, None]) - (c[:, 0, None] - a[:, 0, None]) * (
-        ys - a[:, 1, None])) / det
-    w2 = ((b[:, 0, None] - a[:, 0, None]) * (ys - a[:, 1, None]) - (xs - a[:, 0, None]) * (
-        b[:, 1, None] - a[:, 1, None])) / det
+    w1 = (
+        (xs - a[:, 0, None]) * (c[:, 1, None] - a[:, 1, None])
+        - (c[:, 0, None] - a[:, 0, None]) * (ys - a[:, 1, None])
+    ) / det
+    w2 = (
+        (b[:, 0, None] - a[:, 0, None]) * (ys - a[:, 1, None])
+        - (xs - a[:, 0, None]) * (b[:, 1, None] - a[:, 1, None])
+    ) / det
     w0 = 1.0 - w1 - w2
     inside = (w0 >= -1e-9) & (w1 >= -1e-9) & (w2 >= -1e-9) & ok[:, None]
     inside &= (xs < triangle.shape[1]) & (ys < triangle.shape[0])
