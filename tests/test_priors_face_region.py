@@ -76,7 +76,7 @@ def test_skin_classifier_on_a_real_shadowed_photo(photos):
     grown = cv2.dilate(hull.astype(np.uint8), np.ones((61, 61), np.uint8)).astype(bool)
     h_grown = SkinColourClassifier()(image / 255.0, grown.astype(np.float32))
     foliage = grown & ~hull & (image[..., 1].astype(int) > image[..., 0].astype(int) + 10)
-    assert foliage.sum() > 500
+    assert foliage.sum() > 300
     assert (h_grown[foliage] > 0.5).mean() < 0.1
     assert (h_grown[hull] > 0.5).mean() > 0.85
 

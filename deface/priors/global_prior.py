@@ -19,7 +19,8 @@ def kmeans_palette(
     mask: torch.Tensor | np.ndarray | None = None,
     k: int = 16,
     seed: int = 0,
-    max_samples: int = 65536,
+    max_samples: int = 20000,
+    n_init: int = 10,
 ) -> torch.Tensor:
     """K-means centres [k, 3] of the texels of diffuse0 [Ht, Wt, 3] where mask [Ht, Wt] > 0.5.
 
@@ -44,7 +45,7 @@ def kmeans_palette(
     rng = np.random.default_rng(seed)
     if colours.shape[0] > max_samples:
         colours = colours[rng.choice(colours.shape[0], max_samples, replace=False)]
-    kmeans = KMeans(n_clusters=k, init="random", n_init=10, random_state=seed).fit(colours)
+    kmeans = KMeans(n_clusters=k, init="random", n_init=n_init, random_state=seed).fit(colours)
     return torch.as_tensor(kmeans.cluster_centers_, dtype=torch.float32)
 
 
@@ -54,8 +55,10 @@ def global_prior(
     """GP (scalar): weighted mean over texels of min_c ||T_D - c||^2 (or ||.|| when ``squared=False``)."""
     if diffuse.dim() != 3 or diffuse.shape[-1] != centres.shape[-1]:
         raise ValueError(f"diffuse must be [Ht, Wt, C] matching centres {tuple(centres.shape)}")
-    distances = ((diffuse[:, :, None, :] - centres.to(diffuse)) ** 2).sum(dim=-1)  # [Ht, Wt, k]
-    nearest = distances.min(dim=-1).values  # [Ht, Wt]
+    centres = centres.to(diffuse)
+    # ||x - c||^2 = ||x||^2 - 2 x.c + ||c||^2: a matmul instead of an [Ht, Wt, k, C] difference tensor
+    distances = (diffuse**2).sum(-1, keepdim=True) - 2.0 * diffuse @ centres.T + (centres**2).sum(-1)
+    nearest = distances.min(dim=-1).values.clamp_min(0.0)  # [Ht, Wt]
     if not squared:
         nearest = torch.sqrt(nearest + 1e-12)
     if mask is None:

@@ -38,6 +38,25 @@ def local_variations(texture: torch.Tensor, size: int = 5) -> torch.Tensor:
     return torch.stack(differences, dim=-1)
 
 
+def _mean_variation(difference: torch.Tensor, size: int, norm: str) -> torch.Tensor:
+    """Mean over channels and window offsets of |N(D)| or N(D)^2 for D [H, W, C] -> [H, W]."""
+    if difference.dim() != 3:
+        raise ValueError(f"maps must be [H, W, C], got {tuple(difference.shape)}")
+    if size < 3 or size % 2 != 1:
+        raise ValueError(f"window size must be odd and >= 3, got {size}")
+    radius = size // 2
+    height, width, _ = difference.shape
+    padded = F.pad(difference.permute(2, 0, 1)[None], (radius,) * 4, mode="replicate")[0].permute(1, 2, 0)
+    total = difference.new_zeros(height, width)
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            if dy == 0 and dx == 0:
+                continue
+            step = difference - padded[radius + dy : radius + dy + height, radius + dx : radius + dx + width]
+            total = total + (step.abs() if norm == "l1" else step**2).mean(dim=-1)
+    return total / (size * size - 1)
+
+
 def local_prior(
     current: torch.Tensor,
     reference: torch.Tensor,
@@ -48,13 +67,10 @@ def local_prior(
     """LP (scalar) between current and reference maps [H, W, C] under pixel weights mask [H, W]."""
     if current.shape != reference.shape:
         raise ValueError(f"current {tuple(current.shape)} and reference {tuple(reference.shape)} differ")
-    delta = local_variations(current, size) - local_variations(reference.detach(), size)  # [H, W, C, 24]
-    if norm == "l1":
-        per_pixel = delta.abs().mean(dim=(-1, -2))
-    elif norm == "l2sq":
-        per_pixel = (delta**2).mean(dim=(-1, -2))
-    else:
+    if norm not in NORMS:
         raise ValueError(f"unknown norm {norm!r}; choose one of {NORMS}")
+    # N is linear, so N(T) - N(T0) = N(T - T0): one pass over the offsets, accumulated without stacking.
+    per_pixel = _mean_variation(current - reference.detach(), size, norm)  # [H, W]
     if mask is None:
         return per_pixel.mean()
     if mask.shape != per_pixel.shape:
