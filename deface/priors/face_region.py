@@ -1,0 +1,212 @@
+"""The face-region classifier h that g is distilled from (L_seg), and the project's offline default.
+
+Every classifier follows :class:`FaceRegionClassifier`: ``h = classifier(image, coverage, landmarks)`` with
+image [H, W, 3] sRGB in [0, 1], coverage M_R [H, W] of the fitted face (or any rough face mask), optional 2D
+landmarks [N, 2] (x, y pixels), returning h [H, W] float32 in [0, 1] (numpy; h is computed once per image).
+
+The authors used a pretrained BiSeNet parser (:class:`deface.priors.bisenet.BiSeNetFaceParser`), whose weights
+are not available offline. The default here, :class:`SkinColourClassifier`, needs no weights:
+
+1. region: pixels with coverage > 0.5 (intersected with the landmarks' convex hull when landmarks are given);
+2. features: brows, eyes, nose (nostrils) and lips, as the convex hulls of their landmarks (MediaPipe 468/478
+   or iBUG 68 layouts), dilated, optionally united with a projected model mask; they always count as face;
+3. skin colour model: a Gaussian in linear-RGB chromaticity (r, g) = (R, G) / (R + G + B), fitted on a
+   robust core = region minus features, eroded, without near-black or clipped pixels, trimmed in two passes
+   around the median. Chromaticity is unchanged when intensity is scaled, so a shadowed skin pixel keeps
+   the chroma of lit skin (up to the colour of the shadow's ambient light, which the trimmed spread absorbs);
+4. h = logistic(threshold - Mahalanobis distance) inside the region; dark pixels, whose chroma is noise,
+   take the median of h around them; then a median filter, a morphological closing and opening of the
+   binary part, and a small Gaussian blur.
+
+Limits: colour only. Hair, beards, hats or hands whose chroma is close to skin (blond or auburn hair, skin
+coloured fabric) are kept as face; very dark regions (deep shadow next to black hair) are judged from their
+surroundings; strongly coloured light (a red lamp on half the face) shifts chroma beyond the skin model; the
+region never extends beyond the coverage. Glasses are removed only where their frames/lenses change chroma.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Protocol
+
+import cv2
+import numpy as np
+
+# Feature landmark groups (indices into MediaPipe's 468/478-point face mesh, from its connection lists).
+MEDIAPIPE_FEATURES = {
+    "lips": (0, 13, 14, 17, 37, 39, 40, 61, 78, 80, 81, 82, 84, 87, 88, 91, 95, 146, 178, 181, 185, 191, 267,
+             269, 270, 291, 308, 310, 311, 312, 314, 317, 318, 321, 324, 375, 402, 405, 409, 415),
+    "left_eye": (249, 263, 362, 373, 374, 380, 381, 382, 384, 385, 386, 387, 388, 390, 398, 466),
+    "right_eye": (7, 33, 133, 144, 145, 153, 154, 155, 157, 158, 159, 160, 161, 163, 173, 246),
+    "left_brow": (276, 282, 283, 285, 293, 295, 296, 300, 334, 336),
+    "right_brow": (46, 52, 53, 55, 63, 65, 66, 70, 105, 107),
+    "nostrils": (1, 2, 4, 5, 19, 45, 48, 64, 94, 97, 98, 115, 220, 275, 278, 294, 326, 327, 344, 440),
+}  # fmt: skip
+IBUG68_FEATURES = {
+    "left_brow": tuple(range(17, 22)),
+    "right_brow": tuple(range(22, 27)),
+    "nostrils": tuple(range(30, 36)),
+    "left_eye": tuple(range(36, 42)),
+    "right_eye": tuple(range(42, 48)),
+    "lips": tuple(range(48, 68)),
+}
+
+
+class FaceRegionClassifier(Protocol):
+    """h(image [H, W, 3] sRGB in [0, 1], coverage [H, W], landmarks [N, 2] | None) -> [H, W] in [0, 1]."""
+
+    def __call__(self, image, coverage, landmarks=None) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class SkinClassifierConfig:
+    """Knobs of the colour-based face-region classifier (sizes are fractions of the face box's diagonal)."""
+
+    threshold: float = 3.5
+    """Mahalanobis distance (in chroma) at which h = 0.5."""
+    softness: float = 0.6
+    """Width of the logistic transition of h in Mahalanobis units."""
+    chroma_floor: float = 0.012
+    """Minimum standard deviation of the chroma model (camera noise, compression)."""
+    dark_luma: float = 0.015
+    """Linear luminance under which chroma is unreliable and h is taken from the neighbourhood."""
+    bright_value: float = 0.98
+    """sRGB channel value above which a pixel counts as clipped (excluded from the colour fit)."""
+    feature_dilation: float = 0.03
+    """Dilation of the feature hulls (brows/eyes/nose/lips)."""
+    core_erosion: float = 0.03
+    """Erosion of the region before fitting the colour model (keeps boundary pixels out)."""
+    trim_sigmas: float = 2.5
+    """Robust trimming of the core's chroma, in MAD-based standard deviations."""
+    smoothing: float = 0.015
+    """Median filter size / blur sigma for the final map."""
+
+
+def _as_numpy(array, dtype=np.float32) -> np.ndarray:
+    if hasattr(array, "detach"):
+        array = array.detach().cpu().numpy()
+    return np.asarray(array, dtype=dtype)
+
+
+def _hull_mask(points: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    mask = np.zeros(shape, np.uint8)
+    if len(points) >= 3:
+        hull = cv2.convexHull(np.round(points).astype(np.int32))
+        cv2.fillConvexPoly(mask, hull, 1)
+    return mask.astype(bool)
+
+
+def _disk(radius: int) -> np.ndarray:
+    radius = max(1, int(radius))
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def feature_mask_from_landmarks(landmarks: np.ndarray, shape: tuple[int, int], dilation: int) -> np.ndarray:
+    """Union of the dilated convex hulls of brows, eyes, nostrils and lips (MediaPipe or iBUG-68 layouts)."""
+    count = landmarks.shape[0]
+    groups = MEDIAPIPE_FEATURES if count in (468, 478) else IBUG68_FEATURES if count == 68 else {}
+    mask = np.zeros(shape, bool)
+    for indices in groups.values():
+        mask |= _hull_mask(landmarks[list(indices)], shape)
+    if mask.any() and dilation > 0:
+        mask = cv2.dilate(mask.astype(np.uint8), _disk(dilation)).astype(bool)
+    return mask
+
+
+def chromaticity(linear: np.ndarray) -> np.ndarray:
+    """[..., 3] linear RGB -> [..., 2] (r, g) = (R, G) / (R + G + B)."""
+    total = linear.sum(axis=-1, keepdims=True)
+    return linear[..., :2] / np.maximum(total, 1e-6)
+
+
+def _robust_gaussian(samples: np.ndarray, trim_sigmas: float, floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean [2] and covariance [2, 2] of samples [N, 2] after two median/MAD trimming passes."""
+    kept = samples
+    for _ in range(2):
+        centre = np.median(kept, axis=0)
+        scale = 1.4826 * np.median(np.abs(kept - centre), axis=0) + 1e-6
+        inside = (((kept - centre) / scale) ** 2).sum(axis=1) <= trim_sigmas**2 * 2
+        if inside.sum() >= 10:
+            kept = kept[inside]
+    mean = kept.mean(axis=0)
+    covariance = np.cov(kept.T) + np.eye(2) * floor**2
+    return mean, covariance
+
+
+class SkinColourClassifier:
+    """Offline h: skin-chroma Gaussian fitted on the face itself, landmark features kept (see module doc)."""
+
+    def __init__(self, config: SkinClassifierConfig | None = None):
+        self.config = config or SkinClassifierConfig()
+
+    def __call__(self, image, coverage, landmarks=None, features=None) -> np.ndarray:
+        """h [H, W] float32. ``features``: optional [H, W] mask of projected model features kept as face."""
+        cfg = self.config
+        srgb = np.clip(_as_numpy(image), 0.0, 1.0)
+        if srgb.ndim != 3 or srgb.shape[-1] != 3:
+            raise ValueError(f"image must be [H, W, 3] sRGB in [0, 1], got shape {srgb.shape}")
+        shape = srgb.shape[:2]
+        region = _as_numpy(coverage) > 0.5
+        if region.shape != shape:
+            raise ValueError(f"coverage {region.shape} must match the image {shape}")
+        points = None if landmarks is None else _as_numpy(landmarks, np.float64)[:, :2]
+        if points is not None and points.shape[0] >= 3:
+            hull = cv2.dilate(_hull_mask(points, shape).astype(np.uint8), _disk(2)).astype(bool)
+            region &= hull
+        if region.sum() < 20:
+            raise ValueError("the face region (coverage, landmarks) holds fewer than 20 pixels")
+        ys, xs = np.nonzero(region)
+        diagonal = float(np.hypot(ys.max() - ys.min() + 1, xs.max() - xs.min() + 1))
+
+        feature = np.zeros(shape, bool)
+        if points is not None:
+            feature |= feature_mask_from_landmarks(points, shape, round(cfg.feature_dilation * diagonal))
+        if features is not None:
+            feature |= _as_numpy(features) > 0.5
+        feature &= region
+
+        linear = srgb**2.2
+        luma = linear @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+        reliable = (luma > cfg.dark_luma) & (srgb.max(axis=-1) < cfg.bright_value)
+        core = cv2.erode((region & ~feature).astype(np.uint8), _disk(round(cfg.core_erosion * diagonal)))
+        core = core.astype(bool) & reliable
+        if core.sum() < 20:  # tiny faces: fall back on the whole region
+            core = region & reliable & ~feature
+        if core.sum() < 20:
+            raise ValueError("too few well-exposed skin pixels to fit a colour model")
+        chroma = chromaticity(linear)
+        mean, covariance = _robust_gaussian(chroma[core], cfg.trim_sigmas, cfg.chroma_floor)
+        offset = chroma - mean
+        distance = np.sqrt(np.einsum("...i,ij,...j->...", offset, np.linalg.inv(covariance), offset))
+        skin = 1.0 / (1.0 + np.exp((distance - cfg.threshold) / cfg.softness))
+
+        size = max(3, int(round(cfg.smoothing * diagonal)) | 1)
+        skin = np.where(region, skin, 0.0).astype(np.float32)
+        neighbourhood = cv2.medianBlur((skin * 255).astype(np.uint8), min(size * 3 | 1, 255)) / 255.0
+        skin = np.where(reliable, skin, neighbourhood)
+        skin = cv2.medianBlur((skin * 255).astype(np.uint8), size) / 255.0
+        skin = np.maximum(skin, feature.astype(np.float32))
+        binary = (skin > 0.5).astype(np.uint8)
+        kernel = _disk(size // 2)
+        cleaned = cv2.morphologyEx(cv2.morphologyEx(binary, cv2.MORPH_CLOSE, kernel), cv2.MORPH_OPEN, kernel)
+        # keep the soft values where the cleaning agreed, the cleaned decision elsewhere
+        skin = np.where(cleaned.astype(bool) == binary.astype(bool), skin, cleaned.astype(np.float32))
+        skin = cv2.GaussianBlur(skin.astype(np.float32), (0, 0), sigmaX=max(0.5, size / 3))
+        return np.clip(np.where(region, skin, 0.0), 0.0, 1.0).astype(np.float32)
+
+
+def load_face_region_classifier(
+    models_dir: str | os.PathLike | None = None, prefer: str = "bisenet"
+) -> tuple[FaceRegionClassifier, str]:
+    """(classifier, description): BiSeNet when asked for and its checkpoint is found, else the skin model."""
+    if prefer not in ("bisenet", "skin"):
+        raise ValueError(f"unknown face-region classifier {prefer!r}; choose 'bisenet' or 'skin'")
+    if prefer == "bisenet":
+        from deface.priors.bisenet import BiSeNetFaceParser, MissingWeightsError
+
+        try:
+            return BiSeNetFaceParser.from_models_dir(models_dir), "BiSeNet face parsing (79999_iter.pth)"
+        except MissingWeightsError as error:
+            return SkinColourClassifier(), f"skin-colour classifier (BiSeNet off: {error})"
+    return SkinColourClassifier(), "skin-colour classifier"
