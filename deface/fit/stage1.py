@@ -239,10 +239,17 @@ class _Problem:
 
     def run(self) -> np.ndarray:
         history = []
+        rigid_steps, total = self.config.rigid_iterations, self.config.iterations
         optimiser = self._optimiser(rigid=True)
-        for step in range(self.config.iterations):
-            if step == self.config.rigid_iterations:
+        for step in range(total):
+            if step == rigid_steps:
                 optimiser = self._optimiser(rigid=False)
+            # Cosine decay to 10% within each phase: Adam at a constant step oscillates around the optimum.
+            start, length = (0, rigid_steps) if step < rigid_steps else (rigid_steps, total - rigid_steps)
+            factor = 0.1 + 0.45 * (1 + math.cos(math.pi * (step - start) / max(length, 1)))
+            for group in optimiser.param_groups:
+                group.setdefault("base_lr", group["lr"])
+                group["lr"] = group["base_lr"] * factor
             optimiser.zero_grad(set_to_none=True)
             loss = self.loss()
             loss.backward()
