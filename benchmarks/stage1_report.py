@@ -80,8 +80,11 @@ def main() -> None:
     corr = correspondence_for(model)
     config = Stage1Config(iterations=args.iterations)
     print(f"model {model.name}, {len(corr)} landmark correspondences, {config.iterations} Adam steps")
-    print("| image | faces found | face | error % IOD | residual px | IOD px | detect s | stage 1 s |")
-    print("|---|---|---|---|---|---|---|---|")
+    print(
+        "| image | faces found | face | error % IOD | error % frontal IOD | residual px | IOD px "
+        "| detect s | stage 1 s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
     single_errors, single_times = [], []
     for item in list_inputs([args.images]):
         if item.kind != "image":
@@ -94,15 +97,16 @@ def main() -> None:
             faces = []
         detect_s = time.perf_counter() - start
         if not faces:
-            print(f"| {item.path.name} | 0 | - | - | - | - | {detect_s:.2f} | - |")
+            print(f"| {item.path.name} | 0 | - | - | - | - | - | {detect_s:.2f} | - |")
             continue
         for landmarks in faces:
             start = time.perf_counter()
             result = fit_landmarks(model, corr, [landmarks], landmarks.image_size, config)
             fit_s = time.perf_counter() - start
             error = 100 * float(result.error_iod[0])
+            frontal = 100 * float(result.error_iod_frontal[0])
             print(
-                f"| {item.path.name} | {len(faces)} | {landmarks.face_index} | {error:.2f} | "
+                f"| {item.path.name} | {len(faces)} | {landmarks.face_index} | {error:.2f} | {frontal:.2f} | "
                 f"{result.residual_px[0]:.2f} | {result.iod_px[0]:.1f} | {detect_s:.2f} | {fit_s:.2f} |"
             )
             if len(faces) == 1:

@@ -82,6 +82,9 @@ class Stage1Result:
     projected_2d: np.ndarray  # [T, N, 2] fitted model points projected, pixels
     residual_px: np.ndarray  # [T] mean distance projected <-> detected over the N points, pixels
     iod_px: np.ndarray  # [T] detected inter-ocular distance (outer eye corners 33-263), pixels
+    iod_frontal_px: (
+        np.ndarray
+    )  # [T] fitted 3D outer-eye-corner distance * focal / depth: IOD without yaw shrink
     image_size: tuple[int, int]  # (W, H)
     loss_history: np.ndarray  # [iterations] total loss per step
 
@@ -89,6 +92,11 @@ class Stage1Result:
     def error_iod(self) -> np.ndarray:
         """[T] mean landmark error as a fraction of the inter-ocular distance (outer eye corners)."""
         return self.residual_px / self.iod_px
+
+    @property
+    def error_iod_frontal(self) -> np.ndarray:
+        """[T] mean landmark error as a fraction of the pose-free IOD (fair on profile views)."""
+        return self.residual_px / self.iod_frontal_px
 
     def camera(self, frame: int = 0) -> Camera:
         """The fitted camera of a frame."""
@@ -180,6 +188,7 @@ class _Problem:
         self.id_basis = torch.as_tensor(id_basis)  # [Ki, N, 3]
         self.ex_basis = torch.as_tensor(ex_basis)  # [Ke, N, 3]
         self.weights = torch.as_tensor(corr.weights, dtype=torch.float32)  # [N]
+        self.mediapipe_ids = corr.mediapipe_ids  # [N]
         all_points = np.stack([d.points for d in detections]).astype(np.float32)  # [T, 478, 2]
         self.targets = torch.as_tensor(all_points[:, corr.mediapipe_ids])  # [T, N, 2]
         self.iod = np.linalg.norm(
@@ -207,15 +216,18 @@ class _Problem:
         self.identity = torch.zeros(model.num_identity, requires_grad=True)
         self.expression = torch.zeros(frames, model.num_expression, requires_grad=True)
 
-    def project(self) -> torch.Tensor:
-        """Model landmarks projected with the current parameters [T, N, 2]."""
-        points = (
+    def points(self) -> torch.Tensor:
+        """Model landmarks in the model frame [T, N, 3]."""
+        return (
             self.mean
             + torch.einsum("k,knc->nc", self.identity, self.id_basis)
             + torch.einsum("tk,knc->tnc", self.expression, self.ex_basis)
         )
+
+    def project(self) -> torch.Tensor:
+        """Model landmarks projected with the current parameters [T, N, 2]."""
         focal = self.focal0 * torch.exp(self.log_focal)
-        return project_points(points, self.rotation, self.translation * self.depth0, focal, self.size)
+        return project_points(self.points(), self.rotation, self.translation * self.depth0, focal, self.size)
 
     def loss(self) -> torch.Tensor:
         config = self.config
@@ -260,21 +272,33 @@ class _Problem:
             history.append(float(loss.detach()))
         return np.asarray(history, np.float32)
 
+    def _iod_frontal(self, focal: float) -> np.ndarray:
+        """[T] 3D distance of the fitted outer eye corners, in pixels at their depth (nan if not used)."""
+        ids = [np.flatnonzero(self.mediapipe_ids == m) for m in OUTER_EYE_CORNERS]
+        if any(len(i) == 0 for i in ids):
+            return np.full(len(self.targets), np.nan, np.float32)
+        points = self.points()[:, [ids[0][0], ids[1][0]]]  # [T, 2, 3]
+        cam = torch.einsum("tij,tnj->tni", axis_angle_to_matrix(self.rotation), points)
+        depth = (cam[..., 2] + (self.translation * self.depth0)[:, None, 2]).mean(1)  # [T]
+        return (focal * (points[:, 0] - points[:, 1]).norm(dim=-1) / depth).numpy().astype(np.float32)
+
     @torch.no_grad()
     def result(self, history: np.ndarray) -> Stage1Result:
         projected = self.project()
         distance = (projected - self.targets).norm(dim=-1)  # [T, N]
         residual = (distance * self.weights).sum(1) / self.weights.sum()
+        focal = self.focal0 * math.exp(float(self.log_focal))
         return Stage1Result(
             identity=self.identity.detach().numpy().copy(),
             expression=self.expression.detach().numpy().copy(),
             rotation=self.rotation.detach().numpy().copy(),
             translation=(self.translation * self.depth0).detach().numpy().copy(),
-            focal=np.asarray(self.focal0 * math.exp(float(self.log_focal)), np.float32),
+            focal=np.asarray(focal, np.float32),
             landmarks_2d=self.targets.numpy().copy(),
             projected_2d=projected.numpy().copy(),
             residual_px=residual.numpy().astype(np.float32),
             iod_px=self.iod.astype(np.float32),
+            iod_frontal_px=self._iod_frontal(focal),
             image_size=self.size,
             loss_history=history,
         )
