@@ -23,13 +23,7 @@ import torch
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures, sample_texture
 from deface.render.raycast import RayScene
-from deface.render.sh import (
-    band_of_index,
-    cosine_lobe_coefficients,
-    phong_lobe_filter,
-    sh_basis,
-    sh_basis_rows,
-)
+from deface.render.sh import cosine_lobe_coefficients, phong_lobe_filter, sh_filtered_radiance
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 
@@ -200,9 +194,9 @@ class Renderer:
 
         uv_corners = mesh.triangle_uvs[fragments.triangle_id.reshape(-1)[covered]]  # [N, 3]
         uv = _interpolate(mesh.uvs.to(dtype), uv_corners, bary)  # [N, 2]
-        diffuse = sample_texture(textures.diffuse, uv)  # [N, 3]
-        specular = sample_texture(textures.specular, uv)  # [N, 3]
-        roughness = sample_texture(textures.roughness, uv)  # [N, 1]
+        # one bilinear lookup for all maps: grid_sample's cost is mostly per sample, not per channel
+        stacked = torch.cat([textures.diffuse, textures.specular, textures.roughness], -1)  # [Ht, Wt, 7]
+        diffuse, specular, roughness = sample_texture(stacked, uv).split([3, 3, 1], 1)
 
         radiance = irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]  # [N, K, 3]
         if self.config.specular:
@@ -265,15 +259,16 @@ def _vertex_irradiance(
 ) -> torch.Tensor:
     """normals [V, 3], coeffs [B², K*3] -> irradiance [V, K*3]."""
     lobe = cosine_lobe_coefficients(bands).to(device=coeffs.device, dtype=coeffs.dtype)
-    transfer_v = sh_basis(normals, bands) * lobe  # [V, B²]
+    lobe = lobe[[l * l for l in range(bands)]].expand(normals.shape[0], bands)  # A_l, [V, B]
+    irradiance = sh_filtered_radiance(normals, lobe, coeffs)  # [V, K*3] unshadowed, analytic
     if transfer is not None:
         if transfer.bands < bands or transfer.occluded.shape[0] != normals.shape[0]:
             raise ValueError(
                 f"shadow transfer has {transfer.bands} bands for {transfer.occluded.shape[0]} vertices, "
                 f"need >= {bands} bands for {normals.shape[0]}"
             )
-        transfer_v = transfer_v - transfer.occluded[:, : bands * bands].to(coeffs.dtype)
-    return transfer_v @ coeffs
+        irradiance = irradiance - transfer.occluded[:, : bands * bands].to(coeffs.dtype) @ coeffs
+    return irradiance
 
 
 class ShadowTransferCache:
@@ -321,10 +316,8 @@ def _specular(
     view = camera.center_in_model().to(positions) - positions
     view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [N, 3] towards the camera
     reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [N, 3] unit
-    lobe = phong_lobe_filter(roughness[:, 0], bands).T  # [B, N]
-    lobe = lobe[band_of_index(bands, lobe.device)]  # [B², N]
-    basis = sh_basis_rows(reflected.to(coeffs.dtype), bands)  # [B², N], channel-first is faster
-    return (basis * lobe.to(coeffs.dtype)).T @ coeffs
+    lobe = phong_lobe_filter(roughness[:, 0], bands).to(coeffs.dtype)  # [N, B]
+    return sh_filtered_radiance(reflected.to(coeffs.dtype), lobe, coeffs)
 
 
 def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor) -> torch.Tensor:

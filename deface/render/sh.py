@@ -115,38 +115,95 @@ class _SHBasis(torch.autograd.Function):
     def forward(ctx, directions: torch.Tensor, bands: int) -> torch.Tensor:
         ctx.bands = bands
         ctx.save_for_backward(directions)
-        x, y, z = directions.T.contiguous()
-        cos_stack, sin_stack = _azimuth_rows(x, y, bands)
-        q_rows, _ = _legendre_rows(z, bands, derivative=False)
-        cos_stack, sin_stack = math.sqrt(2.0) * cos_stack, math.sqrt(2.0) * sin_stack
-        out = [q_rows[0]]
-        for l in range(1, bands):  # noqa: E741
-            q = q_rows[l]
-            out += [(q[1:] * sin_stack[1 : l + 1]).flip(0), q[:1], q[1:] * cos_stack[1 : l + 1]]
-        return torch.cat(out)
+        return _sh_rows_forward(directions, bands)
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):
         (directions,) = ctx.saved_tensors
+        return _sh_rows_vjp(directions, grad, ctx.bands), None
+
+
+def _sh_rows_forward(directions: torch.Tensor, bands: int) -> torch.Tensor:
+    """The basis [B², N] at directions [N, 3] (plain tensor ops, no autograd graph needed)."""
+    x, y, z = directions.T.contiguous()
+    cos_stack, sin_stack = _azimuth_rows(x, y, bands)
+    q_rows, _ = _legendre_rows(z, bands, derivative=False)
+    cos_stack, sin_stack = math.sqrt(2.0) * cos_stack, math.sqrt(2.0) * sin_stack
+    out = [q_rows[0]]
+    for l in range(1, bands):  # noqa: E741
+        q = q_rows[l]
+        out += [(q[1:] * sin_stack[1 : l + 1]).flip(0), q[:1], q[1:] * cos_stack[1 : l + 1]]
+    return torch.cat(out)
+
+
+def _sh_rows_vjp(directions: torch.Tensor, grad: torch.Tensor, bands: int) -> torch.Tensor:
+    """sum_j grad[j, n] dY_j/d(x, y, z)(directions[n]) -> [N, 3] (grad [B², N])."""
+    x, y, z = directions.T.contiguous()
+    cos_stack, sin_stack = _azimuth_rows(x, y, bands)
+    q_rows, dq_rows = _legendre_rows(z, bands, derivative=True)
+    grad = grad.contiguous()
+    gx, gy, gz = torch.zeros_like(x), torch.zeros_like(x), torch.zeros_like(x)
+    root2 = math.sqrt(2.0)
+    for l in range(1, bands):  # noqa: E741
+        centre = l * l + l
+        g_pos = grad[centre + 1 : centre + l + 1]  # [l, N], m = 1..l
+        g_neg = grad[centre - l : centre].flip(0)  # [l, N], |m| = 1..l
+        m = torch.arange(1, l + 1, dtype=x.dtype, device=x.device)[:, None]
+        mq = root2 * m * q_rows[l][1:]  # [l, N]
+        c_prev, s_prev = cos_stack[:l], sin_stack[:l]
+        gx = gx + (mq * (g_pos * c_prev + g_neg * s_prev)).sum(0)
+        gy = gy + (mq * (g_neg * c_prev - g_pos * s_prev)).sum(0)
+        radial = g_pos * cos_stack[1 : l + 1] + g_neg * sin_stack[1 : l + 1]
+        gz = gz + grad[centre] * dq_rows[l][0] + root2 * (dq_rows[l][1:] * radial).sum(0)
+    return torch.stack([gx, gy, gz], -1)
+
+
+def sh_filtered_radiance(
+    directions: torch.Tensor, band_filter: torch.Tensor, coeffs: torch.Tensor
+) -> torch.Tensor:
+    """sum_lm f_l c_lm Y_lm(w): directions [N, 3], per-point band filter [N, B], coeffs [B², C] -> [N, C].
+
+    One fused op with an analytic backward (to directions, filter and coefficients): the work horse of
+    irradiance (f_l = A_l) and of the filtered specular lobe (f_l = Lambda_l). Much cheaper than
+    autograd over sh_basis for tens of thousands of points.
+    """
+    bands = band_filter.shape[-1]
+    if coeffs.shape[0] != bands * bands or directions.shape[0] != band_filter.shape[0]:
+        raise ValueError(
+            f"sh_filtered_radiance: got directions {tuple(directions.shape)}, "
+            f"filter {tuple(band_filter.shape)}, coeffs {tuple(coeffs.shape)}"
+        )
+    return _FilteredRadiance.apply(directions, band_filter, coeffs)
+
+
+class _FilteredRadiance(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, directions, band_filter, coeffs):
+        bands = band_filter.shape[-1]
+        index = band_of_index(bands, directions.device)
+        basis = _sh_rows_forward(directions, bands)  # [B², N]
+        weights = band_filter.T.contiguous()[index]  # [B², N]
+        filtered = basis * weights
+        ctx.bands = bands
+        ctx.save_for_backward(directions, basis, weights, coeffs)
+        return filtered.T @ coeffs
+
+    @staticmethod
+    def backward(ctx, grad):
+        directions, basis, weights, coeffs = ctx.saved_tensors
         bands = ctx.bands
-        x, y, z = directions.T.contiguous()
-        cos_stack, sin_stack = _azimuth_rows(x, y, bands)
-        q_rows, dq_rows = _legendre_rows(z, bands, derivative=True)
         grad = grad.contiguous()
-        gx, gy, gz = torch.zeros_like(x), torch.zeros_like(x), torch.zeros_like(x)
-        root2 = math.sqrt(2.0)
-        for l in range(1, bands):  # noqa: E741
-            centre = l * l + l
-            g_pos = grad[centre + 1 : centre + l + 1]  # [l, N], m = 1..l
-            g_neg = grad[centre - l : centre].flip(0)  # [l, N], |m| = 1..l
-            m = torch.arange(1, l + 1, dtype=x.dtype, device=x.device)[:, None]
-            mq = root2 * m * q_rows[l][1:]  # [l, N]
-            c_prev, s_prev = cos_stack[:l], sin_stack[:l]
-            gx = gx + (mq * (g_pos * c_prev + g_neg * s_prev)).sum(0)
-            gy = gy + (mq * (g_neg * c_prev - g_pos * s_prev)).sum(0)
-            radial = g_pos * cos_stack[1 : l + 1] + g_neg * sin_stack[1 : l + 1]
-            gz = gz + grad[centre] * dq_rows[l][0] + root2 * (dq_rows[l][1:] * radial).sum(0)
-        return torch.stack([gx, gy, gz], -1), None
+        grad_filtered = coeffs @ grad.T  # [B², N]
+        grad_dirs = grad_filter = grad_coeffs = None
+        if ctx.needs_input_grad[2]:
+            grad_coeffs = (basis * weights) @ grad  # [B², C]
+        if ctx.needs_input_grad[1]:
+            index = band_of_index(bands, directions.device)
+            per_coeff = grad_filtered * basis  # [B², N]
+            grad_filter = per_coeff.new_zeros(bands, per_coeff.shape[1]).index_add_(0, index, per_coeff).T
+        if ctx.needs_input_grad[0]:
+            grad_dirs = _sh_rows_vjp(directions, grad_filtered * weights, bands)
+        return grad_dirs, grad_filter, grad_coeffs
 
 
 def band_of_index(bands: int, device: torch.device | None = None) -> torch.Tensor:
