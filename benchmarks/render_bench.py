@@ -4,7 +4,7 @@ Prints forward / backward times at 256² and 512² with 5 SH lights (B = 9, 512�
 textures, SH and vertices), the time of one shadow-transfer refresh, the primary ray-cast time and the
 peak memory. Usage:
 
-    DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/render_bench.py [--repeats 20]
+    DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/render_bench.py [--repeats 20] [--threads 1]
 
 The machine is shared: the script reports the median and the minimum over repeats, and the load average.
 """
@@ -57,7 +57,10 @@ def scene(resolution: int):
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=20)
+    parser.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
     args = parser.parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)  # on a busy shared machine 1 thread is far more stable
     print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, load average {os.getloadavg()}")
 
     renderer = Renderer(RenderConfig())
