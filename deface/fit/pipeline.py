@@ -20,8 +20,8 @@ from deface.fit.target import FitTarget, scale_landmarks, working_frames
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.registry import load_face_model
-from deface.priors.face_region import classifier_for
-from deface.priors.human_prior import load_human_prior
+from deface.priors.face_region import load_face_region_classifier
+from deface.priors.human import load_human_prior
 from deface.render.mesh import Textures
 
 
@@ -63,16 +63,21 @@ def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool
 def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source: str = "input",
         video: bool = False, log: FitLog | None = None) -> FitResult:
     """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``."""
-    torch.manual_seed(config.seed)
-    np.random.seed(config.seed)
     log = log or FitLog(name=source)
-    model = load_face_model(config.model, models_dir)
     log.start("landmarks")
     work, landmarks, scale = detect(frames, config, source, video)
     if landmarks[0].num_faces > 1:
         log.info(f"{landmarks[0].num_faces} faces found; fitting face {config.face_index} (0 = largest)")
-    target = FitTarget(work, landmarks, scale)
     log.stop("landmarks")
+    return fit_target(FitTarget(work, landmarks, scale), config, models_dir=models_dir, log=log)
+
+
+def fit_target(target: FitTarget, config: FitConfig, *, models_dir=None, log: FitLog | None = None) -> FitResult:
+    """Stages 1-3 on frames whose landmarks are known (``fit`` detects them; tests give them)."""
+    torch.manual_seed(config.seed)
+    np.random.seed(config.seed)
+    log = log or FitLog()
+    model = load_face_model(config.model, models_dir)
     context = _stage1(model, target, config, log)
     optional = _face_classifier(context, config, models_dir, log)
     log.start("stage 2")
@@ -110,7 +115,7 @@ def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog) -> StageCo
 @torch.no_grad()
 def _face_classifier(context: StageContext, config: FitConfig, models_dir, log: FitLog) -> dict:
     """h per frame from the stage-1 face; returns which optional parser was used (for the run record)."""
-    classifier, note = classifier_for(config.decouple.face_region_source, models_dir)
+    classifier, note = _classifier(config.decouple.face_region_source, models_dir)
     log.info(f"face region h: {note}")
     target = context.target
     for frame in range(target.num_frames):
@@ -119,3 +124,14 @@ def _face_classifier(context: StageContext, config: FitConfig, models_dir, log: 
         h = classifier(target.frames_srgb[frame], coverage.numpy(), target.landmarks[frame].points)
         target.face_classifier[frame] = torch.as_tensor(np.asarray(h), dtype=torch.float32)
     return {"face_parsing": note}
+
+
+def _classifier(source: str, models_dir):
+    """The face-region classifier h for a config's ``face_region_source`` and a note for the run record."""
+    if source == "none":
+        return (lambda image, coverage, landmarks: coverage), "none (h = render mask)"
+    if source == "bisenet":
+        from deface.priors.bisenet import BiSeNetFaceParser
+
+        return BiSeNetFaceParser.from_models_dir(models_dir), "BiSeNet face parsing (79999_iter.pth)"
+    return load_face_region_classifier(models_dir, prefer="bisenet" if source == "auto" else "skin")

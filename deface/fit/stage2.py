@@ -72,7 +72,7 @@ class StageContext:
         if not self.config.shadows:
             return None
         cache = self.shadow_caches[frame]
-        return cache.get(mesh) if refresh or cache.current is None else cache.current
+        return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
 
     def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
         return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
@@ -116,7 +116,7 @@ def _parameter_groups(context: StageContext) -> list[dict]:
 
 
 def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool) -> torch.Tensor:
-    weights, scene, config = context.config.weights, context.scene, context.config
+    weights, scene = context.config.weights, context.scene
     textures = context.albedo_textures()
     total = torch.zeros(())
     for frame in range(context.target.num_frames):
@@ -129,7 +129,6 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool)
     total = total + weights.albedo_prior * scene.albedo.pow(2).mean()
     total = total + weights.identity_prior * scene.identity.pow(2).mean()
     total = total + weights.expression_prior * scene.expression.pow(2).mean()
-    del config
     return total
 
 

@@ -24,6 +24,7 @@ from deface.render.mesh import Textures
 class FrozenFrame:
     """A frame's stage-3 constants: geometry, ray-cast fragments, shadow transfer, M_o, reference albedo."""
 
+    index: int  # frame number
     geometry: object
     fragments: object
     transfer: object
@@ -55,7 +56,7 @@ def initial_textures(context: StageContext) -> Textures:
 def run_stage3(context: StageContext, human_prior=None) -> tuple[Textures, list[float]]:
     """Refine textures; returns the final textures and the loss per iteration."""
     initial = initial_textures(context)
-    frozen = [_freeze(context, frame, initial) for frame in range(context.target.num_frames)]
+    frozen = freeze_frames(context, initial)
     parameters = TextureParameters(initial)
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
     palette = _palette(context, initial)
@@ -103,9 +104,7 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
     coverage = output.mask
     face_region = context.decoupling.face_region(frame, coverage, context.target.face_classifier[frame])
     reference = {"diffuse": output.diffuse, "specular": output.specular, "roughness": output.roughness}
-    frozen = FrozenFrame(geometry, fragments, transfer, face_region.detach(), reference)
-    frozen.index = frame
-    return frozen
+    return FrozenFrame(frame, geometry, fragments, transfer, face_region.detach(), reference)
 
 
 def _topology(context: StageContext):
@@ -150,8 +149,9 @@ def _local_prior(output, reference: dict, coverage: torch.Tensor) -> torch.Tenso
 def _palette(context: StageContext, initial: Textures):
     if not context.config.priors.global_prior:
         return None
+    # 8k texels and 3 restarts: the palette of a smooth T^0 is stable well below sklearn's defaults.
     return kmeans_palette(initial.diffuse, _uv_mask(context, initial), k=context.config.priors.palette_size,
-                          seed=context.config.seed)
+                          seed=context.config.seed, max_samples=8000, n_init=3)
 
 
 def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:

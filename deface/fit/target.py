@@ -11,7 +11,9 @@ import torch
 
 from deface.fit.config import FitConfig
 from deface.io.images import resize_max, srgb_to_linear
+from deface.landmarks.correspondence import model_landmarks
 from deface.landmarks.detect import Landmarks
+from deface.losses.landmarks import landmark_loss
 from deface.render.renderer import RenderConfig
 
 
@@ -29,6 +31,18 @@ class FitTarget:
         self.images = torch.as_tensor(np.stack([srgb_to_linear(f) for f in self.frames_srgb]), dtype=torch.float32)
         if not self.face_classifier:
             self.face_classifier = [None] * len(self.frames_srgb)
+
+    def attach_landmarks(self, corr, stage1) -> None:
+        """Keep the correspondence and the detected points in its order for stage 2's L_lan."""
+        self.correspondence = corr
+        self.detected = torch.as_tensor(stage1.landmarks_2d, dtype=torch.float32)  # [T, N, 2]
+        self.landmark_weights = torch.as_tensor(corr.weights, dtype=torch.float32)  # [N]
+
+    def landmark_loss(self, context, frame: int) -> torch.Tensor:
+        """L_lan as in the authors' code: weighted mean squared pixel distance of the projected points."""
+        geometry = context.geometry(frame)
+        points, _ = geometry.camera.project(model_landmarks(geometry.mesh.vertices, self.correspondence))
+        return landmark_loss(points, self.detected[frame], 1.0, self.landmark_weights, squared=True)
 
     @property
     def num_frames(self) -> int:
