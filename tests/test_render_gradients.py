@@ -55,8 +55,8 @@ class Loss:
         mesh = Mesh(vertices, self.mesh.triangles, self.mesh.uvs, self.mesh.triangle_uvs)
         cam = self.camera(params or self.params)
         fragments = self.renderer.fragments_for(mesh, cam, self.triangle_id)
-        out = self.renderer.shade(mesh, cam, fragments, textures or self.textures, self.sh if sh is None else sh,
-                                  self.transfer)
+        sh = self.sh if sh is None else sh
+        out = self.renderer.shade(mesh, cam, fragments, textures or self.textures, sh, self.transfer)
         return (out.images * self.weights).sum()
 
 

@@ -10,7 +10,7 @@ import torch
 from deface.render.camera import Camera
 from deface.render.mesh import Textures
 from deface.render.primitives import grid_plane, uv_sphere
-from deface.render.renderer import Renderer, RenderConfig
+from deface.render.renderer import RenderConfig, Renderer
 from deface.render.sh import sh_basis
 
 SIZE = 96
@@ -101,10 +101,10 @@ def test_plane_triangle_ids_and_depth_match_ray_plane():
         plane, cam, fragments, Textures.constant(4, dtype=torch.float64), random_light(2, 1), None
     )
     d_cam = dirs @ cam.rotation_matrix.double().numpy().T
-    np.testing.assert_allclose(out.depth.numpy()[inside & margin], (t * d_cam[..., 2])[inside & margin], rtol=1e-9)
+    sel = inside & margin
+    np.testing.assert_allclose(out.depth.numpy()[sel], (t * d_cam[..., 2])[sel], rtol=1e-9)
     # perspective-correct UVs: u = (x + 1) / 2, v = (y + 1) / 2 on this plane
-    np.testing.assert_allclose(out.uv.numpy()[inside & margin], np.stack([x + 1, y + 1], -1)[inside & margin] / 2,
-                               atol=1e-9)
+    np.testing.assert_allclose(out.uv.numpy()[sel], np.stack([x + 1, y + 1], -1)[sel] / 2, atol=1e-9)
 
 
 def test_unshadowed_diffuse_sphere_matches_analytic_irradiance():

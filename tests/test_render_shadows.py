@@ -58,7 +58,8 @@ def test_shadowed_irradiance_matches_monte_carlo():
     unshadowed = vertex_irradiance(mesh, sh, None)[:, 0].numpy()
 
     rng = np.random.default_rng(7)
-    ground = np.nonzero((mesh.vertices[:, 2] == 0).numpy() & (mesh.vertices[:, :2].abs().max(1).values < 1.8).numpy())[0]
+    verts = mesh.vertices.numpy()
+    ground = np.nonzero((verts[:, 2] == 0) & (np.abs(verts[:, :2]).max(1) < 1.8))[0]
     chosen = rng.choice(ground, 16, replace=False)
     worst, darkest = 0.0, 1.0
     for v in chosen:
