@@ -99,7 +99,7 @@ def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog) -> StageCo
     log.start("stage 1")
     corr = correspondence_for(model)
     result = fit_landmarks(model, corr, target.landmarks, target.size,
-                           Stage1Config(iterations=config.iterations.stage1))
+                           _stage1_config(config.iterations.stage1))
     log.stop("stage 1")
     target.attach_landmarks(corr, result)
     scene = SceneParameters(
@@ -110,6 +110,11 @@ def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog) -> StageCo
     )
     decoupling = Decoupling(config.decouple, config.lights.num_lights, target.num_frames, target.size)
     return StageContext(model, target, scene, decoupling, config, topology_tensors(model), log)
+
+
+def _stage1_config(iterations: int) -> Stage1Config:
+    # Rigid (pose-only) steps: 80 of the default 300, fewer for short runs.
+    return Stage1Config(iterations=iterations, rigid_iterations=min(80, max(1, iterations // 4)))
 
 
 @torch.no_grad()
