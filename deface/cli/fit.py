@@ -43,13 +43,14 @@ def fit_command(
     max_frames: Optional[int] = typer.Option(None, help="Video: number of frames used (evenly spread)."),
     frame_stride: Optional[int] = typer.Option(None, help="Video: take every k-th frame first."),
     face_index: Optional[int] = typer.Option(None, help="Which face when several (0 = largest)."),
+    threads: Optional[int] = typer.Option(None, help="Torch threads (default 1: bit-exact results per seed)."),
     overwrite: bool = typer.Option(False, help="Redo inputs whose outputs already exist (default: skip them)."),
     quiet: bool = typer.Option(False, help="Only errors and a summary."),
 ) -> None:
     """Fit each input and write OUT/<input stem>/ (textures, mesh.obj/.mtl/.glb, params, renders, masks)."""
     try:
         config = _config(preset, seed, lights, bands, light_masks, face_region, priors, resolution, iterations,
-                         max_frames, frame_stride, face_index)
+                         max_frames, frame_stride, face_index, threads)
         items = list_inputs(inputs)
     except (InputError, ValueError) as error:
         console.print(f"[red]error:[/red] {error}")
@@ -67,11 +68,11 @@ def run(items: list[InputItem], output: Path, config: FitConfig, models=None, ov
 
 
 def _config(preset, seed, lights, bands, light_masks, face_region, priors, resolution, iterations,
-            max_frames, frame_stride, face_index) -> FitConfig:
+            max_frames, frame_stride, face_index, threads=None) -> FitConfig:
     config = presets.with_ablation(presets.get(preset), num_lights=lights, light_masks=light_masks,
                                    face_region=face_region, priors=priors, bands=bands)
     changes = {"seed": seed, "resolution": resolution, "max_frames": max_frames, "frame_stride": frame_stride,
-               "face_index": face_index}
+               "face_index": face_index, "threads": threads}
     if iterations is not None:
         stage1, stage2, stage3 = _parse_iterations(iterations)
         changes.update({"iterations.stage1": stage1, "iterations.stage2": stage2, "iterations.stage3": stage3})

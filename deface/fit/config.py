@@ -128,6 +128,9 @@ class FitConfig:
     shadow_refresh_every: int = 50
     """Stage 2 refreshes the shadow transfer at most this often (geometry moves slowly)."""
     seed: int = 0
+    threads: int = 1
+    """Torch CPU threads for the fit. 1 makes fits bit-exact for a seed (multi-threaded reductions change
+    the summation order); more threads trade that for speed. Batches parallelise better across processes."""
     max_frames: int = 8
     """Video: frames used (evenly spread over the clip, after `frame_stride`)."""
     frame_stride: int = 1

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,6 +75,23 @@ def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source:
 
 def fit_target(target: FitTarget, config: FitConfig, *, models_dir=None, log: FitLog | None = None) -> FitResult:
     """Stages 1-3 on frames whose landmarks are known (``fit`` detects them; tests give them)."""
+    with torch_threads(config.threads):
+        return _fit_target(target, config, models_dir, log)
+
+
+@contextmanager
+def torch_threads(count: int):
+    """Run with ``count`` torch threads (0: leave torch's default), restoring the previous setting."""
+    previous = torch.get_num_threads()
+    if count > 0:
+        torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | None) -> FitResult:
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
     log = log or FitLog()
