@@ -38,7 +38,10 @@ class Decoupling(torch.nn.Module):
         if self.light_field is None:
             uniform = torch.full((len(self._kept), *coverage.shape), 1.0 / len(self._kept))
             return uniform * coverage
-        masks = self.light_field(self.coords[frame])  # [H, W, K_kept]
+        # f only where the face is rendered: M_N = M_R * f is zero elsewhere, and this halves the cost.
+        covered = coverage > 0
+        masks = coverage.new_zeros((*coverage.shape, len(self._kept)))  # [H, W, K_kept]
+        masks = masks.index_put((covered,), self.light_field(self.coords[frame][covered]))
         return masks.permute(2, 0, 1) * coverage
 
     def face_region(self, frame: int, coverage: torch.Tensor, classifier: torch.Tensor | None) -> torch.Tensor:
