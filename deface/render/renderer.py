@@ -7,14 +7,16 @@ Pipeline (one call renders every light condition; the geometry is visited once):
    corners' camera depths), so gradients reach vertex positions and every camera parameter.
 2. ``shade``: per-vertex SH irradiance [V, K*3] (analytic unshadowed term minus the ray-traced occluded
    transfer, see shadow.py) is interpolated to the covered pixels; diffuse radiance = albedo / pi * E.
-   A Phong specular lobe filtered in SH (see ``_specular``) is evaluated per pixel at the reflected view
-   direction, scaled by the interpolated vertex visibility (shadow approximation for the specular term).
+   A Phong specular lobe filtered in SH (see ``_specular_bands``): per-band SH sums at each vertex's
+   reflected view direction are interpolated like the irradiance and filtered per pixel with the
+   texel's roughness, then scaled by the interpolated vertex visibility (specular shadow approximation).
 Background pixels are 0 in every output. Everything runs on the tensors' device; CPU is the reference.
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +25,12 @@ import torch
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures, sample_texture
 from deface.render.raycast import RayScene
-from deface.render.sh import cosine_lobe_coefficients, phong_lobe_filter, sh_filtered_radiance
+from deface.render.sh import (
+    cosine_lobe_coefficients,
+    phong_lobe_filter,
+    sh_basis_rows,
+    sh_filtered_radiance,
+)
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 
@@ -176,19 +183,21 @@ class Renderer:
         dtype = sh_lights.dtype
         coeffs = sh_lights.permute(1, 0, 2).reshape(bands * bands, num_lights * 3)  # [B², K*3]
 
-        normals_v = mesh.vertex_normals()  # [V, 3]
-        irradiance_v = _vertex_irradiance(normals_v.to(dtype), coeffs, bands, transfer)  # [V, K*3]
-        visibility = None if transfer is None else transfer.visibility.to(dtype)
+        # Only vertices of covered triangles are shaded: corners are renumbered into that subset.
+        used, local = _renumber(corners, mesh.num_vertices)  # [U], [N, 3]
+        normals_v = mesh.vertex_normals().index_select(0, used).to(dtype)  # [U, 3]
+        irradiance_v = _vertex_irradiance(normals_v, coeffs, bands, transfer, used)  # [U, K*3]
 
         # One gather for every per-vertex quantity (index_select's backward is a fast index_add).
-        camera_z = camera.to_camera(mesh.vertices)[:, 2:]  # [V, 1]
-        per_vertex = [irradiance_v, normals_v.to(dtype), camera_z.to(dtype)]
+        camera_z = camera.to_camera(mesh.vertices.index_select(0, used))[:, 2:]  # [U, 1]
+        per_vertex = [irradiance_v, normals_v, camera_z.to(dtype)]
         if self.config.specular:
-            per_vertex.append(mesh.vertices.to(dtype))
-            if visibility is not None:
-                per_vertex.append(visibility[:, None])
+            positions = mesh.vertices.index_select(0, used).to(dtype)  # [U, 3]
+            bands_v = _specular_bands(positions, normals_v, camera, coeffs, bands)  # [U, B*K*3]
+            if transfer is not None:
+                per_vertex.append(transfer.visibility.to(dtype).index_select(0, used)[:, None])
         sizes = [t.shape[1] for t in per_vertex]
-        pixel_values = _interpolate(torch.cat(per_vertex, 1), corners, bary).split(sizes, 1)
+        pixel_values = _interpolate(torch.cat(per_vertex, 1), local, bary).split(sizes, 1)
         irradiance, normals, depth = pixel_values[:3]  # [N, K*3], [N, 3], [N, 1]
         normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
 
@@ -200,9 +209,10 @@ class Renderer:
 
         radiance = irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]  # [N, K, 3]
         if self.config.specular:
-            lit = _specular(pixel_values[3], normals, roughness, camera, coeffs, bands)  # [N, K*3]
-            if visibility is not None:
-                lit = lit * pixel_values[4]
+            lobe = phong_lobe_filter(roughness[:, 0], bands).to(dtype)  # [N, B], per-texel roughness
+            lit = _FilteredInterpolation.apply(bands_v, local, bary, lobe)  # [N, K*3]
+            if transfer is not None:
+                lit = lit * pixel_values[3]
             radiance = radiance + lit.reshape(-1, num_lights, 3) * specular[:, None]
         radiance = radiance.reshape(-1, num_lights * 3)
 
@@ -255,19 +265,27 @@ def vertex_irradiance(
 
 
 def _vertex_irradiance(
-    normals: torch.Tensor, coeffs: torch.Tensor, bands: int, transfer: ShadowTransfer | None
+    normals: torch.Tensor, coeffs: torch.Tensor, bands: int, transfer: ShadowTransfer | None,
+    subset: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """normals [V, 3], coeffs [B², K*3] -> irradiance [V, K*3]."""
+    """normals [U, 3], coeffs [B², K*3] -> irradiance [U, K*3].
+
+    ``subset`` [U] (long) are the mesh vertices the normals belong to (None: all V vertices, U = V).
+    """
     lobe = cosine_lobe_coefficients(bands).to(device=coeffs.device, dtype=coeffs.dtype)
     lobe = lobe[[l * l for l in range(bands)]].expand(normals.shape[0], bands)  # A_l, [V, B]
     irradiance = sh_filtered_radiance(normals, lobe, coeffs)  # [V, K*3] unshadowed, analytic
     if transfer is not None:
-        if transfer.bands < bands or transfer.occluded.shape[0] != normals.shape[0]:
+        occluded = transfer.occluded
+        num_vertices = normals.shape[0] if subset is None else None
+        if transfer.bands < bands or (num_vertices is not None and occluded.shape[0] != num_vertices):
             raise ValueError(
-                f"shadow transfer has {transfer.bands} bands for {transfer.occluded.shape[0]} vertices, "
+                f"shadow transfer has {transfer.bands} bands for {occluded.shape[0]} vertices, "
                 f"need >= {bands} bands for {normals.shape[0]}"
             )
-        irradiance = irradiance - transfer.occluded[:, : bands * bands].to(coeffs.dtype) @ coeffs
+        if subset is not None:
+            occluded = occluded.index_select(0, subset)
+        irradiance = irradiance - occluded[:, : bands * bands].to(coeffs.dtype) @ coeffs
     return irradiance
 
 
@@ -302,22 +320,97 @@ class ShadowTransferCache:
         return self.transfer
 
 
-def _specular(
-    positions: torch.Tensor, normals: torch.Tensor, roughness: torch.Tensor, camera: Camera,
-    coeffs: torch.Tensor, bands: int,
+def _specular_bands(
+    positions: torch.Tensor, normals: torch.Tensor, camera: Camera, coeffs: torch.Tensor, bands: int
 ) -> torch.Tensor:
-    """Phong-lobe specular radiance per unit k_s, [N, K*3].
+    """Per-vertex, per-band reflected radiance S_l(v) = sum_m c_lm Y_lm(r_v), [U, B*K*3] (band-major).
 
-    L_spec = sum_lm Lambda_l c_lm Y_lm(r), r = 2 (n.v) n - v the mirrored view direction, with the
-    Phong SH filter Lambda_l = exp(-l²/(2s)), s = 2/alpha² - 2 (Ramamoorthi & Hanrahan 2001, "A
-    signal-processing framework for inverse rendering"; Walter et al. 2007 for s(alpha)); see
-    ``sh.phong_lobe_filter``. A constant environment L gives k_s L.
+    The Phong specular radiance per unit k_s is L_spec = sum_l Lambda_l(alpha) S_l(r), r = 2 (n.v) n - v
+    the mirrored view direction, with the Phong SH filter Lambda_l = exp(-l²/(2s)), s = 2/alpha² - 2
+    (Ramamoorthi & Hanrahan 2001, "A signal-processing framework for inverse rendering"; Walter et al.
+    2007 for s(alpha)); see ``sh.phong_lobe_filter``. A constant environment L gives k_s L.
+
+    Approximation: the band sums S_l are evaluated at the *vertices'* reflected directions (vertex
+    normal, view from the camera centre to the vertex) and interpolated to the pixels with the
+    barycentrics, as Gouraud shading does; the roughness filter Lambda_l is then applied per pixel, so
+    the per-texel roughness stays exact. Highlights narrower than a triangle are blurred across it, in
+    exchange for ~3x fewer SH evaluations (vertices instead of covered pixels). Since Lambda_0 = 1 and
+    barycentrics sum to 1, a constant environment still gives exactly k_s L.
     """
     view = camera.center_in_model().to(positions) - positions
-    view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [N, 3] towards the camera
-    reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [N, 3] unit
-    lobe = phong_lobe_filter(roughness[:, 0], bands).to(coeffs.dtype)  # [N, B]
-    return sh_filtered_radiance(reflected.to(coeffs.dtype), lobe, coeffs)
+    view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [U, 3] towards the camera
+    reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [U, 3]
+    reflected = reflected / reflected.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # unit for the SH
+    basis = sh_basis_rows(reflected.to(coeffs.dtype), bands)  # [B², U]
+    sums = [basis[l * l : (l + 1) ** 2].T @ coeffs[l * l : (l + 1) ** 2] for l in range(bands)]  # [U, C]
+    return torch.cat(sums, 1)
+
+
+class _FilteredInterpolation(torch.autograd.Function):
+    """out[p] = sum_i sum_l bary[p, i] lobe[p, l] S[corner_i(p), l]: per-band vertex values S [U, B*C]
+    (band-major), corners [N, 3], bary [N, 3], lobe [N, B] -> [N, C].
+
+    A sparse [N, U*B] matrix with 3B weights per pixel times S viewed as [U*B, C]: no [N, B*C] per-pixel
+    buffer is materialised in the forward pass (such buffers cost more in page faults than in arithmetic).
+    """
+
+    @staticmethod
+    def forward(ctx, values, corners, bary, lobe):
+        num, bands = lobe.shape
+        channels = values.shape[1] // bands
+        weights = (bary[:, :, None] * lobe[:, None, :]).reshape(-1)  # [N*3*B]
+        columns = (corners[:, :, None] * bands + torch.arange(bands, device=corners.device)).reshape(-1)
+        rows = torch.arange(0, weights.numel() + 1, 3 * bands, device=corners.device)
+        matrix = _csr(rows, columns, weights, size=(num, values.shape[0] * bands))
+        flat = values.reshape(-1, channels)  # [U*B, C]
+        ctx.save_for_backward(values, corners, bary, lobe, rows, columns)
+        return matrix @ flat
+
+    @staticmethod
+    def backward(ctx, grad):
+        values, corners, bary, lobe, rows, columns = ctx.saved_tensors
+        num, bands = lobe.shape
+        grad = grad.contiguous()
+        grad_values = grad_bary = grad_lobe = None
+        if ctx.needs_input_grad[2] or ctx.needs_input_grad[3]:
+            pattern = _csr(
+                rows, columns, grad.new_zeros(columns.numel()), size=(num, values.shape[0] * bands)
+            )
+            flat = values.reshape(-1, grad.shape[1])
+            # d out[p] / d weight[p, i, l] = S[corner_i, l]: (grad @ S^T) sampled at the sparsity pattern
+            grad_weights = torch.sparse.sampled_addmm(pattern, grad, flat.T, beta=0.0).values()
+            grad_weights = grad_weights.reshape(num, 3, bands)
+            grad_bary = (grad_weights * lobe[:, None, :]).sum(-1)
+            grad_lobe = (grad_weights * bary[:, :, None]).sum(1)
+        if ctx.needs_input_grad[0]:
+            # grad S[v, l] = sum_{(p, i): corner_i(p) = v} bary[p, i] lobe[p, l] grad[p]: a [U, N] CSR
+            # matrix of barycentrics (3 per pixel, sorted by vertex) times [N, B*C] lobe-weighted grads
+            corner_flat = corners.reshape(-1)
+            order = torch.argsort(corner_flat, stable=True)
+            counts = torch.bincount(corner_flat, minlength=values.shape[0])
+            crow = torch.cat([counts.new_zeros(1), counts.cumsum(0)])
+            transpose = _csr(
+                crow, order // 3, bary.reshape(-1)[order], size=(values.shape[0], num)
+            )
+            weighted = (lobe[:, :, None] * grad[:, None, :]).reshape(num, -1)  # [N, B*C]
+            grad_values = transpose @ weighted
+        return grad_values, None, grad_bary, grad_lobe
+
+
+def _csr(rows: torch.Tensor, columns: torch.Tensor, values: torch.Tensor, size: tuple) -> torch.Tensor:
+    """A sparse CSR matrix; indices are built by this module, so torch's invariant checks are skipped."""
+    with warnings.catch_warnings():  # torch warns that CSR support is "beta" on every construction
+        warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta state")
+        return torch.sparse_csr_tensor(rows, columns, values, size=size, check_invariants=False)
+
+
+def _renumber(corners: torch.Tensor, num_vertices: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The vertices used by ``corners`` [N, 3] (sorted, [U]) and the corners renumbered into them."""
+    flags = torch.zeros(num_vertices, dtype=torch.bool, device=corners.device)
+    flags[corners.reshape(-1)] = True
+    used = torch.nonzero(flags)[:, 0]  # [U]
+    new_index = torch.cumsum(flags, 0) - 1  # [V], valid where flags
+    return used, new_index[corners]
 
 
 def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor) -> torch.Tensor:
