@@ -140,3 +140,19 @@ def test_compose_and_composite_by_hand():
     assert out[0, 0, 0] == pytest.approx(2.5) and out[1, 0, 0] == pytest.approx(1.25) and out[0, 1, 0] == 0
     with pytest.raises(ValueError):
         compose_face(renders, masks[:1])
+
+
+def test_face_region_field_masked_matches_full_evaluation():
+    import torch
+
+    from deface.decouple.coords import pixel_coordinates
+    from deface.decouple.fields import FaceRegionField
+
+    torch.manual_seed(0)
+    field = FaceRegionField()
+    coords = pixel_coordinates(12, 10)
+    mask = torch.rand(12, 10) > 0.4
+    full = field(coords)
+    masked = field.masked(coords, mask)
+    assert torch.allclose(masked[mask], full[mask], atol=1e-6)
+    assert torch.all(masked[~mask] == 0)

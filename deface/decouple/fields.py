@@ -133,3 +133,16 @@ class FaceRegionField(nn.Module):
         features = self.act(self.conv(encoded.permute(0, 3, 1, 2))).permute(0, 2, 3, 1)  # [T, H, W, C]
         prob = torch.sigmoid(self.mlp(features)[..., 0])  # [T, H, W]
         return prob[0] if single else prob
+
+    def masked(self, coords: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """g at the pixels of ``mask`` only: coords [H, W, 3], mask [H, W] bool -> [H, W], 0 outside.
+
+        The 5x5 convolution still sees the whole coordinate image (same values as :meth:`forward` at the
+        masked pixels); only the per-pixel MLP, the expensive part, is restricted.
+        """
+        _check_coords(coords)
+        encoded = fourier_features(coords[None], self.fourier_frequencies)
+        features = self.act(self.conv(encoded.permute(0, 3, 1, 2)))[0].permute(1, 2, 0)  # [H, W, C]
+        values = torch.sigmoid(self.mlp(features[mask])[..., 0])  # [N]
+        return features.new_zeros(mask.shape).index_put((mask,), values)
+

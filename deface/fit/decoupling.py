@@ -44,10 +44,19 @@ class Decoupling(torch.nn.Module):
         masks = masks.index_put((covered,), self.light_field(self.coords[frame][covered]))
         return masks.permute(2, 0, 1) * coverage
 
-    def face_region(self, frame: int, coverage: torch.Tensor, classifier: torch.Tensor | None) -> torch.Tensor:
-        """M_o [H, W] under the switches (see module doc)."""
+    def region_probability(self, frame: int, coverage: torch.Tensor) -> torch.Tensor | None:
+        """g [H, W] where the face is rendered (0 elsewhere: M_o = M_R g and L_seg only see it there)."""
+        if self.region_field is None:
+            return None
+        return self.region_field.masked(self.coords[frame], coverage > 0)
+
+    def face_region(self, frame: int, coverage: torch.Tensor, classifier: torch.Tensor | None,
+                    probability: torch.Tensor | None = None) -> torch.Tensor:
+        """M_o [H, W] under the switches (see module doc); ``probability`` reuses an evaluated g."""
         if self.region_field is not None:
-            return coverage * self.region_field(self.coords[frame])
+            if probability is None:
+                probability = self.region_probability(frame, coverage)
+            return coverage * probability
         if self.config.restrict_to_face and classifier is not None:
             return coverage * classifier
         return coverage

@@ -32,6 +32,7 @@ class FrameRender:
     light_masks: torch.Tensor  # [K, H, W] M_L
     face_region: torch.Tensor  # [H, W] M_o
     face: torch.Tensor  # [H, W, 3] I_R
+    region_probability: torch.Tensor | None = None  # [H, W] g (None without the field g)
 
 
 class StageContext:
@@ -64,9 +65,10 @@ class StageContext:
 
     def compose(self, frame: int, light_images: torch.Tensor, coverage: torch.Tensor) -> FrameRender:
         light_masks = self.decoupling.light_masks(frame, coverage)
-        face_region = self.decoupling.face_region(frame, coverage, self.target.face_classifier[frame])
+        probability = self.decoupling.region_probability(frame, coverage)
+        face_region = self.decoupling.face_region(frame, coverage, self.target.face_classifier[frame], probability)
         face = (light_images * light_masks[..., None]).sum(0)
-        return FrameRender(light_images, coverage, light_masks, face_region, face)
+        return FrameRender(light_images, coverage, light_masks, face_region, face, probability)
 
     def _transfer(self, frame: int, mesh, refresh: bool):
         if not self.config.shadows:
@@ -135,10 +137,9 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool)
 def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool) -> torch.Tensor:
     weights, form = context.config.weights, context.config.decouple.loss_form
     decoupling, total = context.decoupling, torch.zeros(())
-    if decoupling.region_field is not None and context.target.face_classifier[frame] is not None:
-        g = decoupling.region_field(decoupling.coords[frame])
+    if rendered.region_probability is not None and context.target.face_classifier[frame] is not None:
         total = total + weights.segmentation * decouple_losses.segmentation_loss(
-            g, context.target.face_classifier[frame], rendered.coverage, form=form)
+            rendered.region_probability, context.target.face_classifier[frame], rendered.coverage, form=form)
     if decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         if before_ace:
             total = total + weights.area * decouple_losses.area_loss(rendered.light_masks, rendered.coverage,
