@@ -334,8 +334,8 @@ def _specular_bands(
     normal, view from the camera centre to the vertex) and interpolated to the pixels with the
     barycentrics, as Gouraud shading does; the roughness filter Lambda_l is then applied per pixel, so
     the per-texel roughness stays exact. Highlights narrower than a triangle are blurred across it, in
-    exchange for ~3x fewer SH evaluations (vertices instead of covered pixels). Since Lambda_0 = 1 and
-    barycentrics sum to 1, a constant environment still gives exactly k_s L.
+    exchange for ~4-5x fewer SH evaluations (ICT at 256²: 6.2k used vertices, 29k pixels). Since
+    Lambda_0 = 1 and barycentrics sum to 1, a constant environment still gives exactly k_s L.
     """
     view = camera.center_in_model().to(positions) - positions
     view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [U, 3] towards the camera
