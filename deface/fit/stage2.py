@@ -54,8 +54,8 @@ class StageContext:
         return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
 
     def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool,
-                     all_lights: bool = False) -> FrameRender:
-        geometry = self.geometry(frame)
+                     all_lights: bool = False, geometry=None) -> FrameRender:
+        geometry = geometry or self.geometry(frame)
         fragments = self.renderer.rasterize(geometry.mesh, geometry.camera)
         transfer = self._transfer(frame, geometry.mesh, refresh_shadows)
         kept = list(range(self.scene.lights.shape[0])) if all_lights else self.decoupling.kept
@@ -122,9 +122,10 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool)
     textures = context.albedo_textures()
     total = torch.zeros(())
     for frame in range(context.target.num_frames):
-        rendered = context.render_frame(frame, textures, refresh_shadows)
+        geometry = context.geometry(frame)  # once per step: shared by the render and L_lan
+        rendered = context.render_frame(frame, textures, refresh_shadows, geometry=geometry)
         total = total + weights.photometric * context.photometric(frame, rendered)
-        total = total + weights.landmarks * context.target.landmark_loss(context, frame)
+        total = total + weights.landmarks * context.target.landmark_loss(geometry, frame)
         total = total + _decoupling_terms(context, frame, rendered, before_ace)
     total = total / context.target.num_frames
     total = total + weights.sh_regulariser * scene.lights[context.decoupling.kept].pow(2).mean()

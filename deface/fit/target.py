@@ -38,9 +38,9 @@ class FitTarget:
         self.detected = torch.as_tensor(stage1.landmarks_2d, dtype=torch.float32)  # [T, N, 2]
         self.landmark_weights = torch.as_tensor(corr.weights, dtype=torch.float32)  # [N]
 
-    def landmark_loss(self, context, frame: int) -> torch.Tensor:
-        """L_lan as in the authors' code: weighted mean squared pixel distance of the projected points."""
-        geometry = context.geometry(frame)
+    def landmark_loss(self, geometry, frame: int) -> torch.Tensor:
+        """L_lan as in the authors' code: weighted mean squared pixel distance of the projected points
+        of ``geometry`` (the frame's posed mesh and camera)."""
         points, _ = geometry.camera.project(model_landmarks(geometry.mesh.vertices, self.correspondence))
         return landmark_loss(points, self.detected[frame], 1.0, self.landmark_weights, squared=True)
 
