@@ -19,8 +19,9 @@ REFERENCE_PHOTOS = (
 
 
 def register(app: typer.Typer) -> None:
-    bench = typer.Typer(no_args_is_help=True, help="Benchmark data: synthetic shadow pairs.")
+    bench = typer.Typer(no_args_is_help=True, help="Benchmark data (synthetic shadow pairs) and the texture-recovery benchmark.")
     bench.command("make-shadows")(make_shadows_command)
+    bench.command("run")(run_command)
     app.add_typer(bench, name="bench")
 
 
@@ -77,3 +78,33 @@ def make_shadows_command(
             f"face {pair['face_region']}"
         )
     console.print(f"wrote {len(manifest['pairs'])} pairs to {output}")
+
+
+def run_command(
+    pairs: Annotated[Path, typer.Argument(help="Pairs folder (from make-shadows).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Results folder (cached per pair).")],
+    variants: Annotated[str, typer.Option(help="Comma list of variants in priority order, or 'all'.")] = "all",
+    schedule: Annotated[str, typer.Option(help="'quick' (recorded tables) or 'full' (presets as defined).")] = "quick",
+    jobs: Annotated[int, typer.Option(help="Fits in parallel (one per core).")] = 2,
+    limit: Annotated[int | None, typer.Option(help="Use only the first N pairs (sorted by name).")] = None,
+    report: Annotated[Path, typer.Option(help="Markdown file whose evaluation section is rewritten.")] = Path(
+        "BENCHMARKS.md"),
+) -> None:
+    """Fit every variant on every pair (texture-swap protocol), then rewrite the tables in REPORT."""
+    from rich.console import Console
+
+    from deface.eval.benchmark import SCHEDULES, VARIANTS, report_markdown, run_benchmark, update_benchmarks_md
+
+    console = Console(soft_wrap=True)
+    names = list(VARIANTS) if variants == "all" else [v.strip() for v in variants.split(",") if v.strip()]
+    if schedule not in SCHEDULES:
+        raise typer.BadParameter(f"unknown schedule {schedule!r}; choose {', '.join(SCHEDULES)}")
+    try:
+        run_benchmark(pairs, output, names, schedule, jobs, limit, log=console.print)
+    except ValueError as error:
+        console.print(f"[red]error:[/red] {error}")
+        raise typer.Exit(2) from None
+    command = f"deface bench run {pairs} -o {output} --variants {variants} --schedule {schedule} --jobs {jobs}"
+    command += f" --limit {limit}" if limit else ""
+    update_benchmarks_md(report, report_markdown(output, pairs, schedule, command, limit))
+    console.print(f"wrote the evaluation tables to {report}")

@@ -1,0 +1,36 @@
+"""The benchmark harness end to end on one tiny pair (smoke schedule), and the BENCHMARKS.md rewrite."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+from deface.eval.benchmark import TABLES, VARIANTS, report_markdown, run_benchmark, update_benchmarks_md
+
+
+def test_every_table_row_names_a_variant():
+    assert all(name in VARIANTS for _, rows in TABLES for _, name in rows)
+
+
+def test_benchmark_smoke_run_writes_metrics_and_tables(photos, tmp_path):
+    pair = tmp_path / "pairs" / "one"
+    pair.mkdir(parents=True)
+    shutil.copy(photos / "000031.jpg", pair / "source.jpg")
+    shutil.copy(photos / "000031.jpg", pair / "target.jpg")
+    out = tmp_path / "results"
+    run_benchmark(tmp_path / "pairs", out, ["nextface", "ours"], schedule="smoke", jobs=1, log=lambda _: None)
+    metrics = json.loads((out / "ours" / "metrics.json").read_text())
+    assert metrics["pairs"][0]["name"] == "one"
+    target = metrics["mean"]["target"]["face"]
+    assert 5 < target["psnr"] < 60 and 0 < target["ssim"] <= 1 and target["lpips"] >= 0
+    # Cached: a second run re-fits nothing and gives the same numbers.
+    run_benchmark(tmp_path / "pairs", out, ["ours"], schedule="smoke", jobs=1, log=lambda _: None)
+    assert json.loads((out / "ours" / "metrics.json").read_text()) == metrics
+    report = tmp_path / "BENCHMARKS.md"
+    report.write_text("# Benchmarks\n\nkept text\n")
+    section = report_markdown(out, tmp_path / "pairs", "smoke", "deface bench run ...")
+    update_benchmarks_md(report, section)
+    update_benchmarks_md(report, section)  # idempotent: the section is replaced, not appended twice
+    text = report.read_text()
+    assert "kept text" in text and text.count("## Texture recovery") == 1
+    assert "| Ours |" in text and "| NextFace* | not run" in text
