@@ -19,7 +19,9 @@ REFERENCE_PHOTOS = (
 
 
 def register(app: typer.Typer) -> None:
-    bench = typer.Typer(no_args_is_help=True, help="Benchmark data (synthetic shadow pairs) and the texture-recovery benchmark.")
+    bench = typer.Typer(
+        no_args_is_help=True, help="Benchmark data (synthetic shadow pairs) and the texture-recovery benchmark."
+    )
     bench.command("make-shadows")(make_shadows_command)
     bench.command("run")(run_command)
     app.add_typer(bench, name="bench")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -21,13 +20,13 @@ def pairs_command(
     directory: Path = typer.Argument(..., help="Folder of pairs: DIR/<name>/source.(png|jpg) + target.(png|jpg)."),
     output: Path = typer.Option(..., "-o", "--output", help="Where metrics.json and index.html go."),
     preset: str = typer.Option("default", help=f"One of: {', '.join(presets.names())}."),
-    models: Optional[Path] = typer.Option(None, "--models", help="Model files folder."),
-    iterations: Optional[str] = typer.Option(None, help="Iterations per stage S1,S2,S3 (override the preset)."),
-    lights: Optional[int] = typer.Option(None, help="Ablation: n."),
-    bands: Optional[int] = typer.Option(None, help="Ablation: SH bands."),
-    light_masks: Optional[bool] = typer.Option(None, "--light-masks/--no-light-masks"),
-    face_region: Optional[bool] = typer.Option(None, "--face-region/--no-face-region"),
-    priors: Optional[str] = typer.Option(None, help="Ablation: gp,lp,hp or none."),
+    models: Path | None = typer.Option(None, "--models", help="Model files folder."),
+    iterations: str | None = typer.Option(None, help="Iterations per stage S1,S2,S3 (override the preset)."),
+    lights: int | None = typer.Option(None, help="Ablation: n."),
+    bands: int | None = typer.Option(None, help="Ablation: SH bands."),
+    light_masks: bool | None = typer.Option(None, "--light-masks/--no-light-masks"),
+    face_region: bool | None = typer.Option(None, "--face-region/--no-face-region"),
+    priors: str | None = typer.Option(None, help="Ablation: gp,lp,hp or none."),
 ) -> None:
     """Fit every pair's source and target, swap textures, score, write OUT/metrics.json and OUT/index.html."""
     from deface.cli.fit import _config

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import typer
@@ -31,19 +30,19 @@ def fit_command(
     inputs: list[Path] = typer.Argument(..., help="Images, folders of images, or videos."),
     output: Path = typer.Option(..., "-o", "--output", help="Output folder; one sub-folder per input."),
     preset: str = typer.Option("default", help=f"One of: {', '.join(presets.names())}."),
-    models: Optional[Path] = typer.Option(None, "--models", help="Model files folder (else DEFACE_MODELS, cache)."),
+    models: Path | None = typer.Option(None, "--models", help="Model files folder (else DEFACE_MODELS, cache)."),
     seed: int = typer.Option(0, help="Random seed (fits are deterministic for a seed)."),
-    lights: Optional[int] = typer.Option(None, help="Ablation: initial number of light conditions n."),
-    bands: Optional[int] = typer.Option(None, help="Ablation: SH bands B per light."),
-    light_masks: Optional[bool] = typer.Option(None, "--light-masks/--no-light-masks", help="Ablation: field f."),
-    face_region: Optional[bool] = typer.Option(None, "--face-region/--no-face-region", help="Ablation: field g."),
-    priors: Optional[str] = typer.Option(None, help="Ablation: priors to use, comma list of gp,lp,hp or none."),
-    resolution: Optional[int] = typer.Option(None, help="Working resolution (longest side, px)."),
-    iterations: Optional[str] = typer.Option(None, help="Iterations per stage as S1,S2,S3 (e.g. 300,400,200)."),
-    max_frames: Optional[int] = typer.Option(None, help="Video: number of frames used (evenly spread)."),
-    frame_stride: Optional[int] = typer.Option(None, help="Video: take every k-th frame first."),
-    face_index: Optional[int] = typer.Option(None, help="Which face when several (0 = largest)."),
-    threads: Optional[int] = typer.Option(None, help="Torch threads (default 1: bit-exact results per seed)."),
+    lights: int | None = typer.Option(None, help="Ablation: initial number of light conditions n."),
+    bands: int | None = typer.Option(None, help="Ablation: SH bands B per light."),
+    light_masks: bool | None = typer.Option(None, "--light-masks/--no-light-masks", help="Ablation: field f."),
+    face_region: bool | None = typer.Option(None, "--face-region/--no-face-region", help="Ablation: field g."),
+    priors: str | None = typer.Option(None, help="Ablation: priors to use, comma list of gp,lp,hp or none."),
+    resolution: int | None = typer.Option(None, help="Working resolution (longest side, px)."),
+    iterations: str | None = typer.Option(None, help="Iterations per stage as S1,S2,S3 (e.g. 300,400,200)."),
+    max_frames: int | None = typer.Option(None, help="Video: number of frames used (evenly spread)."),
+    frame_stride: int | None = typer.Option(None, help="Video: take every k-th frame first."),
+    face_index: int | None = typer.Option(None, help="Which face when several (0 = largest)."),
+    threads: int | None = typer.Option(None, help="Torch threads (default 1: bit-exact results per seed)."),
     overwrite: bool = typer.Option(False, help="Redo inputs whose outputs already exist (default: skip them)."),
     quiet: bool = typer.Option(False, help="Only errors and a summary."),
 ) -> None:

@@ -9,6 +9,7 @@ default preset itself) point to it instead of being fitted twice.
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import platform
 import time
@@ -16,7 +17,6 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from deface.eval.metrics import mean_scores
 from deface.eval.pairs import Pair, read_pairs
 from deface.eval.report import PairScores, write_metrics_json
 from deface.fit import presets
@@ -101,12 +101,19 @@ def run_benchmark(pairs_dir: Path, out_dir: Path, variants: list[str], schedule:
         raise ValueError(f"unknown variant(s) {unknown}; known: {', '.join(VARIANTS)}")
     pairs = read_pairs(pairs_dir)[:limit]
     tasks = [(v, schedule, pair, str(out_dir), models_dir) for v in variants for pair in pairs]
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        for name, pair_name, seconds in pool.map(_run_pair, tasks):
-            log(f"{name} / {pair_name}: {seconds:.0f} s per fit")
+    for name, pair_name, seconds in _map(_run_pair, tasks, jobs):
+        log(f"{name} / {pair_name}: {seconds:.0f} s per fit")
     for name in variants:
         _write_variant_metrics(out_dir, name, pairs)
+
+
+def _map(function, tasks: list, jobs: int):
+    """In order; in ``jobs`` fresh processes (spawned: forking after torch/MediaPipe start is unsafe)."""
+    if jobs <= 1:
+        yield from map(function, tasks)
+        return
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        yield from pool.map(function, tasks)
 
 
 def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
@@ -140,8 +147,9 @@ def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str,
         "",
         f"Regenerate: `{command}`",
         "",
-        f"Data: {len(pairs)} pairs ({', '.join(p.name for p in pairs)}) from `deface bench make-shadows` (clean photos of ../shared/data/images,"
-        " list in docs/evaluation.md): source = photo with a synthetic cast shadow, target = the clean photo.",
+        f"Data: {len(pairs)} pairs ({', '.join(p.name for p in pairs)}) from `deface bench make-shadows`"
+        " (clean photos of ../shared/data/images, list in docs/evaluation.md): source = photo with a"
+        " synthetic cast shadow, target = the clean photo.",
         f"Schedule `{schedule}`: {SCHEDULES[schedule] or 'each preset as defined'}. Machine: "
         f"{platform.machine()}, {os.cpu_count()} cores, no GPU; one fit per core, 1 torch thread each.",
         "Columns: target synthesis (target geometry, pose and lights with the source's textures) scored over"

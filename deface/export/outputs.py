@@ -20,9 +20,8 @@ import numpy as np
 import torch
 
 import deface
-from deface.export.files import save_png, staged_directory, write_json
+from deface.export.files import save_png, staged_directory, to_uint8, write_json
 from deface.export.mesh import TEXTURE_FILES, write_glb, write_obj
-from deface.export.files import to_uint8
 from deface.fit.config import to_dict
 
 

@@ -14,9 +14,9 @@ import torch
 
 from deface.fit.stage2 import FrameRender, StageContext
 from deface.losses import decouple as decouple_losses
+from deface.losses.texture import texture_regularisers
 from deface.priors.global_prior import global_prior, kmeans_palette
 from deface.priors.local_prior import local_prior
-from deface.losses.texture import texture_regularisers
 from deface.render.mesh import Textures
 
 
