@@ -109,3 +109,20 @@ def test_bad_inputs_fail_in_one_line_and_the_batch_goes_on(tmp_path, photos):
 def test_unknown_preset_is_a_clear_error(tmp_path, photos):
     result = CliRunner().invoke(app, ["fit", str(photos / "000031.jpg"), "-o", str(tmp_path), "--preset", "nope"])
     assert result.exit_code == 2 and "unknown preset 'nope'" in result.output
+
+
+@pytest.mark.slow
+def test_fit_command_on_a_clip_shares_textures_and_writes_frames(shared, tmp_path):
+    clip = shared / "data" / "videos" / "d18.mp4"
+    result = CliRunner().invoke(app, ["fit", str(clip), "-o", str(tmp_path), "--preset", "fast",
+                                      "--iterations", "20,4,2", "--max-frames", "2", "--quiet"])
+    assert result.exit_code == 0, result.output
+    folder = tmp_path / "d18"
+    params = json.loads((folder / "params.json").read_text())
+    assert len(params["frames"]) == 2 and params["frames"][0] == 0
+    assert len(params["expression"]) == 2 and len(params["pose"]["rotation_axis_angle"]) == 2
+    assert len(params["identity"]) == 100  # one shared identity
+    for frame in ("000", "001"):
+        assert (folder / "frames" / frame / "render.png").is_file()
+        assert (folder / "frames" / frame / "masks" / "face.png").is_file()
+    assert (folder / "textures" / "diffuse.png").is_file() and (folder / "mesh.obj").is_file()
