@@ -13,25 +13,33 @@ import torch
 AREA_NORMALISERS = ("render_mask", "image")
 
 
-def light_areas(light_masks: torch.Tensor, coverage: torch.Tensor, area_normaliser: str = "render_mask"):
-    """Area fraction [n] of each light. light_masks [T, n, H, W] (already times M_R), coverage [T, H, W]."""
-    if light_masks.dim() == 3:
-        light_masks = light_masks[None]
+def as_frames(masks: torch.Tensor, coverage: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Masks [n, H, W] or [T, n, H, W] and coverage [H, W] or [T, H, W] -> the 4-D and 3-D forms, checked."""
+    if masks.dim() == 3:
+        masks = masks[None]
     if coverage.dim() == 2:
         coverage = coverage[None]
-    if light_masks.dim() != 4 or coverage.shape != (light_masks.shape[0], *light_masks.shape[2:]):
+    if masks.dim() != 4 or coverage.shape != (masks.shape[0], *masks.shape[2:]):
         raise ValueError(
-            f"expected light_masks [T, n, H, W] and coverage [T, H, W], got {tuple(light_masks.shape)} "
-            f"and {tuple(coverage.shape)}"
+            f"expected masks [T, n, H, W] and coverage [T, H, W], got {tuple(masks.shape)} and "
+            f"{tuple(coverage.shape)}"
         )
-    totals = light_masks.sum(dim=(0, 2, 3))  # [n]
+    return masks, coverage
+
+
+def area_denominator(coverage: torch.Tensor, area_normaliser: str) -> torch.Tensor:
+    """sum M_R ("render_mask", the authors' code) or the pixel count of all frames ("image", the paper)."""
     if area_normaliser == "render_mask":
-        denominator = coverage.sum().clamp_min(1e-8)
-    elif area_normaliser == "image":
-        denominator = float(coverage.numel())
-    else:
-        raise ValueError(f"unknown area_normaliser {area_normaliser!r}; choose one of {AREA_NORMALISERS}")
-    return totals / denominator
+        return coverage.sum().clamp_min(1e-8)
+    if area_normaliser == "image":
+        return torch.tensor(float(coverage.numel()), dtype=coverage.dtype, device=coverage.device)
+    raise ValueError(f"unknown area_normaliser {area_normaliser!r}; choose one of {AREA_NORMALISERS}")
+
+
+def light_areas(light_masks: torch.Tensor, coverage: torch.Tensor, area_normaliser: str = "render_mask"):
+    """Area fraction [n] of each light. light_masks [T, n, H, W] (already times M_R), coverage [T, H, W]."""
+    light_masks, coverage = as_frames(light_masks, coverage)
+    return light_masks.sum(dim=(0, 2, 3)) / area_denominator(coverage, area_normaliser)  # [n]
 
 
 @torch.no_grad()

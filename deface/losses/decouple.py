@@ -27,29 +27,10 @@ from __future__ import annotations
 
 import torch
 
+from deface.decouple.ace import AREA_NORMALISERS, area_denominator, as_frames
+
 FORMS = ("code", "paper")
-NORMALISERS = ("render_mask", "image")
-
-
-def _as_frames(masks: torch.Tensor, coverage: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    if masks.dim() == 3:
-        masks = masks[None]
-    if coverage.dim() == 2:
-        coverage = coverage[None]
-    if masks.dim() != 4 or coverage.shape != (masks.shape[0], *masks.shape[2:]):
-        raise ValueError(
-            f"expected masks [T, n, H, W] and coverage [T, H, W], got {tuple(masks.shape)} and "
-            f"{tuple(coverage.shape)}"
-        )
-    return masks, coverage
-
-
-def _normaliser(coverage: torch.Tensor, normaliser: str) -> torch.Tensor:
-    if normaliser == "render_mask":
-        return coverage.sum().clamp_min(1e-8)
-    if normaliser == "image":
-        return torch.tensor(float(coverage.numel()), dtype=coverage.dtype, device=coverage.device)
-    raise ValueError(f"unknown normaliser {normaliser!r}; choose one of {NORMALISERS}")
+NORMALISERS = AREA_NORMALISERS
 
 
 def _spread_loss(masks, coverage, centres, form, normaliser) -> torch.Tensor:
@@ -57,10 +38,10 @@ def _spread_loss(masks, coverage, centres, form, normaliser) -> torch.Tensor:
     difference = masks - centres
     if form == "code":
         per_pixel = torch.exp(-(difference**2)).sum(dim=1)  # [T, H, W]
-        return (coverage * per_pixel).sum() / _normaliser(coverage, "render_mask") - 1.0
+        return (coverage * per_pixel).sum() / area_denominator(coverage, "render_mask") - 1.0
     if form == "paper":
         per_pixel = torch.exp(-difference.abs()).mean(dim=1)
-        return (coverage * per_pixel).sum() / _normaliser(coverage, normaliser) - 1.0
+        return (coverage * per_pixel).sum() / area_denominator(coverage, normaliser) - 1.0
     raise ValueError(f"unknown loss form {form!r}; choose one of {FORMS}")
 
 
@@ -68,7 +49,7 @@ def area_loss(
     light_masks: torch.Tensor, coverage: torch.Tensor, form: str = "code", normaliser: str = "render_mask"
 ) -> torch.Tensor:
     """L_area (scalar) of masks [T, n, H, W] (or [n, H, W]) under coverage [T, H, W]: spreads masks apart."""
-    masks, coverage = _as_frames(light_masks, coverage)
+    masks, coverage = as_frames(light_masks, coverage)
     centres = masks.mean(dim=1, keepdim=True)  # [T, 1, H, W]
     return _spread_loss(masks, coverage, centres, form, normaliser)
 
@@ -77,9 +58,9 @@ def binary_loss(
     light_masks: torch.Tensor, coverage: torch.Tensor, form: str = "code", normaliser: str = "render_mask"
 ) -> torch.Tensor:
     """L_bin (scalar) of the kept masks [T, n_L, H, W]; pushes each mask away from its own area fraction."""
-    masks, coverage = _as_frames(light_masks, coverage)
+    masks, coverage = as_frames(light_masks, coverage)
     area_normaliser = "render_mask" if form == "code" else normaliser
-    areas = (masks * coverage[:, None]).sum(dim=(0, 2, 3)) / _normaliser(coverage, area_normaliser)  # [n]
+    areas = (masks * coverage[:, None]).sum(dim=(0, 2, 3)) / area_denominator(coverage, area_normaliser)  # [n]
     return _spread_loss(masks, coverage, areas[None, :, None, None], form, normaliser)
 
 
