@@ -27,11 +27,12 @@ from deface.fit.config import to_dict
 
 def write_fit(result, final_folder: Path, record: dict) -> Path:
     """Write everything for ``result`` atomically into ``final_folder``; ``record`` adds input details."""
+    renders = result.render()
     with staged_directory(final_folder) as folder:
         _write_textures(result, folder)
         _write_mesh(result, folder)
-        _write_renders(result, folder)
-        _write_params(result, folder, record)
+        _write_renders(result, renders, folder)
+        _write_params(result, renders, folder, record)
         _write_loss_log(result, folder)
     return final_folder
 
@@ -60,8 +61,7 @@ def _write_mesh(result, folder: Path) -> None:
               to_uint8(_np(result.textures.roughness), srgb=False))
 
 
-def _write_renders(result, folder: Path) -> None:
-    renders = result.render()
+def _write_renders(result, renders: list, folder: Path) -> None:
     kept = result.context.decoupling.kept
     for frame, rendered in enumerate(renders):
         base = folder if len(renders) == 1 else folder / "frames" / f"{frame:03d}"
@@ -73,7 +73,7 @@ def _write_renders(result, folder: Path) -> None:
             save_png(base / "masks" / f"light_{light}.png", _np(rendered.light_masks[slot]), srgb=False)
 
 
-def _write_params(result, folder: Path, record: dict) -> None:
+def _write_params(result, renders: list, folder: Path, record: dict) -> None:
     context = result.context
     scene, config, target = context.scene, context.config, context.target
     kept = context.decoupling.kept
@@ -106,7 +106,6 @@ def _write_params(result, folder: Path, record: dict) -> None:
         "input": record,
     }
     write_json(folder / "params.json", params)
-    renders = result.render()
     np.savez_compressed(
         folder / "params.npz",
         vertices=_export_vertices(result),
