@@ -444,7 +444,7 @@ def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor
 
 def _pixel_rays(camera: Camera, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Model-frame rays through pixel positions (x right, y down): origins [N, 3], unit directions [N, 3]."""
-    focal = float(camera.focal)
+    focal = float(camera.focal.detach())
     dirs_cam = np.stack(
         [(xs - camera.width / 2) / focal, (ys - camera.height / 2) / focal, np.ones_like(xs)], -1
     )
