@@ -126,3 +126,12 @@ def test_fit_command_on_a_clip_shares_textures_and_writes_frames(shared, tmp_pat
         assert (folder / "frames" / frame / "render.png").is_file()
         assert (folder / "frames" / frame / "masks" / "face.png").is_file()
     assert (folder / "textures" / "diffuse.png").is_file() and (folder / "mesh.obj").is_file()
+
+
+def test_missing_bfm_files_are_reported_in_one_line(tmp_path, photos, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    result = CliRunner().invoke(app, ["fit", str(photos / "000031.jpg"), "-o", str(tmp_path / "out"),
+                                      "--model", "bfm", "--quiet"])
+    assert result.exit_code == 1
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "model2017-1_face12_nomouth.h5" in errors[0] and "bfm2017" in errors[0]

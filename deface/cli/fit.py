@@ -31,6 +31,7 @@ def fit_command(
     output: Path = typer.Option(..., "-o", "--output", help="Output folder; one sub-folder per input."),
     preset: str = typer.Option("default", help=f"One of: {', '.join(presets.names())}."),
     models: Path | None = typer.Option(None, "--models", help="Model files folder (else DEFACE_MODELS, cache)."),
+    model: str = typer.Option("ict", "--model", help="Face model: ict (embedded) or bfm (BFM 2017 + AlbedoMM)."),
     seed: int = typer.Option(0, help="Random seed (fits are deterministic for a seed)."),
     lights: int | None = typer.Option(None, help="Ablation: initial number of light conditions n."),
     bands: int | None = typer.Option(None, help="Ablation: SH bands B per light."),
@@ -48,8 +49,8 @@ def fit_command(
 ) -> None:
     """Fit each input and write OUT/<input stem>/ (textures, mesh.obj/.mtl/.glb, params, renders, masks)."""
     try:
-        config = _config(preset, seed, lights, bands, light_masks, face_region, priors, resolution, iterations,
-                         max_frames, frame_stride, face_index, threads)
+        config = override(_config(preset, seed, lights, bands, light_masks, face_region, priors, resolution,
+                                  iterations, max_frames, frame_stride, face_index, threads), model=model)
         items = list_inputs(inputs)
     except (InputError, ValueError) as error:
         console.print(f"[red]error:[/red] {error}")

@@ -57,7 +57,7 @@ MODEL_FILES: tuple[ModelFile, ...] = (
     ModelFile(
         key="bfm2017",
         relative_path="bfm2017/model2017-1_face12_nomouth.h5",
-        description="Basel Face Model 2017, face12 without mouth (shape + expression) for --face-model bfm",
+        description="Basel Face Model 2017, face12 without mouth (shape + expression) for `deface fit --model bfm`",
         source="register at https://faces.dmi.unibas.ch/bfm/bfm2017.html; get model2017-1_face12_nomouth.h5",
         licence="BFM 2017 licence: non-commercial research, no redistribution",
         sha256=None,
@@ -67,7 +67,7 @@ MODEL_FILES: tuple[ModelFile, ...] = (
     ModelFile(
         key="albedomm",
         relative_path="albedomm/albedoModel2020_face12_albedoPart.h5",
-        description="AlbedoMM diffuse + specular albedo model on BFM face12 (for --face-model bfm)",
+        description="AlbedoMM diffuse + specular albedo model on BFM face12 (for `deface fit --model bfm`)",
         source="https://github.com/waps101/AlbedoMM/releases (albedoModel2020_face12_albedoPart.h5)",
         licence="AlbedoMM: academic/non-commercial use (see its repository)",
         sha256=None,
