@@ -96,8 +96,9 @@ def run_stage2(context: StageContext) -> list[float]:
         loss.backward()
         optimiser.step()
         scene.clamp_(context.model.expression_prior)
-        history.append(float(loss))
-        context.log.step("stage 2", step, config.iterations.stage2, float(loss))
+        value = float(loss.detach())
+        history.append(value)
+        context.log.step("stage 2", step, config.iterations.stage2, value)
     return history
 
 

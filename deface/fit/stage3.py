@@ -69,8 +69,9 @@ def run_stage3(context: StageContext, human_prior=None) -> tuple[Textures, list[
         loss = loss + _texture_terms(context, textures, initial, palette, uv_mask)
         loss.backward()
         optimiser.step()
-        history.append(float(loss))
-        context.log.step("stage 3", step, context.config.iterations.stage3, float(loss))
+        value = float(loss.detach())
+        history.append(value)
+        context.log.step("stage 3", step, context.config.iterations.stage3, value)
     return parameters.textures(), history
 
 
