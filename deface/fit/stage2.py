@@ -53,12 +53,11 @@ class StageContext:
         roughness = torch.full((*diffuse.shape[:2], 1), self.model.albedo.roughness_default)
         return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
 
-    def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool,
-                     all_lights: bool = False, geometry=None) -> FrameRender:
+    def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool, geometry=None) -> FrameRender:
         geometry = geometry or self.geometry(frame)
         fragments = self.renderer.rasterize(geometry.mesh, geometry.camera)
         transfer = self._transfer(frame, geometry.mesh, refresh_shadows)
-        kept = list(range(self.scene.lights.shape[0])) if all_lights else self.decoupling.kept
+        kept = self.decoupling.kept
         output = self.renderer.shade(geometry.mesh, geometry.camera, fragments, textures,
                                      self.scene.lights[kept], transfer)
         return self.compose(frame, output.images, output.mask)

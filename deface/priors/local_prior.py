@@ -19,41 +19,32 @@ NORMS = ("l1", "l2sq")
 CODE_WEIGHTS = (5.0, 6.0, 1.0)  # diffuse, specular, roughness (the authors' code)
 
 
-def local_variations(texture: torch.Tensor, size: int = 5) -> torch.Tensor:
-    """[Ht, Wt, C] -> [Ht, Wt, C, size^2 - 1]: T(p) - T(p + o) for each offset o != 0 (row-major order)."""
+def _neighbour_differences(texture: torch.Tensor, size: int):
+    """Yield T(p) - T(p + o) [H, W, C] for each offset o != 0 of the size x size window (row-major),
+    with replicate padding; texture [H, W, C]."""
     if texture.dim() != 3:
-        raise ValueError(f"texture must be [Ht, Wt, C], got {tuple(texture.shape)}")
+        raise ValueError(f"maps must be [H, W, C], got {tuple(texture.shape)}")
     if size < 3 or size % 2 != 1:
         raise ValueError(f"window size must be odd and >= 3, got {size}")
     radius = size // 2
     height, width, _ = texture.shape
     padded = F.pad(texture.permute(2, 0, 1)[None], (radius,) * 4, mode="replicate")[0].permute(1, 2, 0)
-    differences = []
     for dy in range(-radius, radius + 1):
         for dx in range(-radius, radius + 1):
-            if dy == 0 and dx == 0:
-                continue
-            neighbour = padded[radius + dy : radius + dy + height, radius + dx : radius + dx + width]
-            differences.append(texture - neighbour)
-    return torch.stack(differences, dim=-1)
+            if dy or dx:
+                yield texture - padded[radius + dy : radius + dy + height, radius + dx : radius + dx + width]
+
+
+def local_variations(texture: torch.Tensor, size: int = 5) -> torch.Tensor:
+    """[Ht, Wt, C] -> [Ht, Wt, C, size^2 - 1]: T(p) - T(p + o) for each offset o != 0 (row-major order)."""
+    return torch.stack(list(_neighbour_differences(texture, size)), dim=-1)
 
 
 def _mean_variation(difference: torch.Tensor, size: int, norm: str) -> torch.Tensor:
     """Mean over channels and window offsets of |N(D)| or N(D)^2 for D [H, W, C] -> [H, W]."""
-    if difference.dim() != 3:
-        raise ValueError(f"maps must be [H, W, C], got {tuple(difference.shape)}")
-    if size < 3 or size % 2 != 1:
-        raise ValueError(f"window size must be odd and >= 3, got {size}")
-    radius = size // 2
-    height, width, _ = difference.shape
-    padded = F.pad(difference.permute(2, 0, 1)[None], (radius,) * 4, mode="replicate")[0].permute(1, 2, 0)
-    total = difference.new_zeros(height, width)
-    for dy in range(-radius, radius + 1):
-        for dx in range(-radius, radius + 1):
-            if dy == 0 and dx == 0:
-                continue
-            step = difference - padded[radius + dy : radius + dy + height, radius + dx : radius + dx + width]
-            total = total + (step.abs() if norm == "l1" else step**2).mean(dim=-1)
+    total = difference.new_zeros(difference.shape[:2])
+    for step in _neighbour_differences(difference, size):
+        total = total + (step.abs() if norm == "l1" else step**2).mean(dim=-1)
     return total / (size * size - 1)
 
 
