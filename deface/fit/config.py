@@ -121,6 +121,10 @@ class FitConfig:
     iterations: Iterations = field(default_factory=Iterations)
     learning_rates: LearningRates = field(default_factory=LearningRates)
     priors: PriorConfig = field(default_factory=PriorConfig)
+    texture_filter: bool = False
+    """Stage 3 updates textures through a 3x3 Gaussian (against texel aliasing; see stage3.TextureParameters).
+    Off by default: on two benchmark pairs it improved the source fit (+1 dB) but not the texture transfer
+    (target synthesis -0.3 and -1.0 dB; BENCHMARKS.md)."""
     shadows: bool = True
     """Ray-traced self-shadowing in the renderer."""
     shadow_rays: int = 128
