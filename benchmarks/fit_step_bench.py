@@ -34,7 +34,7 @@ def main() -> None:
     torch.set_num_threads(1)
     config = override(presets.get("default"), resolution=args.resolution)
     log = FitLog(quiet=True)
-    work, landmarks, scale = pipeline.detect([load_image(args.photo)], config, str(args.photo), False)
+    work, landmarks, scale, _ = pipeline.detect([load_image(args.photo)], config, str(args.photo), False)
     context = pipeline._stage1(load_face_model("ict"), FitTarget(work, landmarks, scale), config, log)
     pipeline._face_classifier(context, config, None, log)
     _stage2_loss(context, True, True).backward()  # shadow transfer and caches

@@ -94,7 +94,7 @@ def _write_params(result, renders: list, folder: Path, record: dict) -> None:
                    "sh": {str(k): lights[k].tolist() for k in kept},
                    "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame"},
         "albedo_coefficients": _np(scene.albedo).tolist(),
-        "frames": record.get("frames", [0]),
+        "frames": _frames(record.get("frames", [0]), target.kept_frames),
         "preset": config.preset,
         "config": to_dict(config),
         "seed": config.seed,
@@ -116,6 +116,11 @@ def _write_params(result, renders: list, folder: Path, record: dict) -> None:
         face_region=np.stack([_np(r.face_region) for r in renders]).astype(np.float16),
         landmarks_2d=np.stack([lm.points for lm in target.landmarks]),
     )
+
+
+def _frames(indices: list[int], kept: list[int] | None) -> list[int]:
+    """Source frame numbers of the fitted frames (frames without a face were left out)."""
+    return indices if kept is None else [indices[i] for i in kept]
 
 
 def _write_loss_log(result, folder: Path) -> None:

@@ -58,7 +58,7 @@ def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool
     else:
         found = [detect_landmarks(frames[0], face_index=config.face_index, source=source)]
     keep = [i for i, item in enumerate(found) if item is not None]
-    return [work[i] for i in keep], [scale_landmarks(found[i], scale, size) for i in keep], scale
+    return [work[i] for i in keep], [scale_landmarks(found[i], scale, size) for i in keep], scale, keep
 
 
 def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source: str = "input",
@@ -66,11 +66,14 @@ def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source:
     """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``."""
     log = log or FitLog(name=source)
     log.start("landmarks")
-    work, landmarks, scale = detect(frames, config, source, video)
+    work, landmarks, scale, kept = detect(frames, config, source, video)
     if landmarks[0].num_faces > 1:
         log.info(f"{landmarks[0].num_faces} faces found; fitting face {config.face_index} (0 = largest)")
+    if len(kept) < len(frames):
+        log.info(f"frames without a face were left out: {sorted(set(range(len(frames))) - set(kept))}")
     log.stop("landmarks")
-    return fit_target(FitTarget(work, landmarks, scale), config, models_dir=models_dir, log=log)
+    target = FitTarget(work, landmarks, scale, kept_frames=kept)
+    return fit_target(target, config, models_dir=models_dir, log=log)
 
 
 def fit_target(target: FitTarget, config: FitConfig, *, models_dir=None, log: FitLog | None = None) -> FitResult:

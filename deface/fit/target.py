@@ -25,6 +25,7 @@ class FitTarget:
     landmarks: list[Landmarks]  # T detections at working resolution
     scale: float  # working / original resolution
     face_classifier: list[torch.Tensor | None] = field(default_factory=list)  # T x [H, W] h, set later
+    kept_frames: list[int] | None = None  # positions of these frames among the input frames (None: all)
     images: torch.Tensor = field(init=False)  # [T, H, W, 3] linear RGB
 
     def __post_init__(self) -> None:
