@@ -33,7 +33,8 @@ def shadowed_face(shared):
 def _diffuse_error(face, diffuse: torch.Tensor, region: np.ndarray) -> float:
     """Mean absolute error of the recovered diffuse albedo at the texels seen by ``region``'s pixels."""
     uv = torch.as_tensor(face.uv[region])
-    return float((sample_texture(diffuse, uv) - sample_texture(face.textures.diffuse, uv)).abs().mean())
+    error = (sample_texture(diffuse.detach(), uv) - sample_texture(face.textures.diffuse, uv)).abs().mean()
+    return float(error)
 
 
 def _fit(face, preset: str):
