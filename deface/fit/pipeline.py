@@ -16,7 +16,7 @@ from deface.fit.log import FitLog
 from deface.fit.scene import SceneParameters, initial_lights, topology_tensors
 from deface.fit.stage1 import Stage1Config, fit_landmarks
 from deface.fit.stage2 import FrameRender, StageContext, run_stage2
-from deface.fit.stage3 import FrozenFrame, freeze_frames, initial_textures, render_frozen, run_stage3
+from deface.fit.stage3 import FrozenFrame, render_frozen, run_stage3
 from deface.fit.target import FitTarget, scale_landmarks, working_frames
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
@@ -109,11 +109,9 @@ def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | 
     if human_prior is None and config.priors.human_prior:
         log.info(f"human prior (FaceNet) not used: {reason}")
     log.start("stage 3")
-    textures, _ = run_stage3(context, human_prior)
+    stage3 = run_stage3(context, human_prior)
     log.stop("stage 3")
-    initial = initial_textures(context)
-    frozen = freeze_frames(context, initial)
-    return FitResult(context, frozen, textures, initial, log, optional)
+    return FitResult(context, stage3.frozen, stage3.textures, stage3.initial, log, optional)
 
 
 def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog) -> StageContext:

@@ -66,8 +66,16 @@ def initial_textures(context: StageContext) -> Textures:
     return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
 
 
-def run_stage3(context: StageContext, human_prior=None) -> tuple[Textures, list[float]]:
-    """Refine textures; returns the final textures and the loss per iteration."""
+@dataclass(frozen=True)
+class Stage3Result:
+    textures: Textures  # refined UV maps
+    initial: Textures  # T^0
+    frozen: list[FrozenFrame]  # per-frame constants, reused to re-render with any textures
+    history: list[float]  # loss per iteration
+
+
+def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
+    """Refine textures from T^0 with the frames' geometry frozen."""
     initial = initial_textures(context)
     frozen = freeze_frames(context, initial)
     parameters = TextureParameters(initial, context.config.texture_filter)
@@ -85,7 +93,8 @@ def run_stage3(context: StageContext, human_prior=None) -> tuple[Textures, list[
         value = float(loss.detach())
         history.append(value)
         context.log.step("stage 3", step, context.config.iterations.stage3, value)
-    return parameters.textures(), history
+    with torch.no_grad():
+        return Stage3Result(parameters.textures(), initial, frozen, history)
 
 
 def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, object]:
