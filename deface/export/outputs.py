@@ -88,7 +88,7 @@ def _write_params(result, renders: list, folder: Path, record: dict) -> None:
         "pose": {"rotation_axis_angle": _np(scene.rotation).tolist(),
                  "translation_cm": _np(scene.translation).tolist(),
                  "convention": "model -> camera; camera x right, y down, z forward (OpenCV)"},
-        "camera": {"focal_px": float(scene.focal), "width": width, "height": height,
+        "camera": {"focal_px": float(scene.focal.detach()), "width": width, "height": height,
                    "principal_point": [width / 2, height / 2], "working_scale": target.scale},
         "lights": {"bands": config.lights.bands, "kept": kept, "initial_count": int(lights.shape[0]),
                    "sh": {str(k): lights[k].tolist() for k in kept},
