@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 
+from deface.eval import identity
 from deface.eval.benchmark import TABLES, VARIANTS, report_markdown, run_benchmark, update_benchmarks_md
 
 
@@ -23,6 +24,8 @@ def test_benchmark_smoke_run_writes_metrics_and_tables(photos, tmp_path):
     assert metrics["pairs"][0]["name"] == "one"
     target = metrics["mean"]["target"]["face"]
     assert 5 < target["psnr"] < 60 and 0 < target["ssim"] <= 1 and target["lpips"] >= 0
+    # The protocol adds the identity distance whenever dlib is installed (scripts/setup.sh installs it).
+    assert ("identity" in metrics["mean"]["target"]) == identity.available()
     # Cached: a second run re-fits nothing and gives the same numbers.
     run_benchmark(tmp_path / "pairs", out, ["ours"], schedule="smoke", jobs=1, log=lambda _: None)
     assert json.loads((out / "ours" / "metrics.json").read_text()) == metrics

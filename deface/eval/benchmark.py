@@ -129,13 +129,15 @@ def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
 def _row(out_dir: Path, label: str, name: str) -> str:
     path = out_dir / name / "metrics.json"
     if not path.exists():
-        return f"| {label} | not run | | | | | | |"
+        return f"| {label} | not run | | | | | | | |"
     mean = json.loads(path.read_text())["mean"]
     target, source = mean["target"], mean["source"]
     seconds = json.loads((out_dir / name / "timing.json").read_text())["seconds_per_fit"]
     cells = [target["face"]["psnr"], target["face"]["ssim"], target["face"]["lpips"], target["full"]["psnr"],
              target["full"]["ssim"], target["full"]["lpips"], source["face"]["psnr"]]
     text = [f"{c:.2f}" if i not in (1, 4) else f"{c:.3f}" for i, c in enumerate(cells)]
+    identity = target.get("identity")  # absent without dlib, or when a cached pair predates the column
+    text.append(f"{identity['distance']:.3f}" if identity else "-")
     return f"| {label} | " + " | ".join(text) + f" | {sum(seconds) / len(seconds):.0f} |"
 
 
@@ -154,11 +156,13 @@ def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str,
         f"{platform.machine()}, {os.cpu_count()} cores, no GPU; one fit per core, 1 torch thread each.",
         "Columns: target synthesis (target geometry, pose and lights with the source's textures) scored over"
         " the face region h and over the full composite; source reconstruction PSNR over the face region;"
-        " LPIPS x100; seconds = mean wall time per fit.",
+        " LPIPS x100; ID dist = dlib face-descriptor distance of the target synthesis (full composite) to the"
+        " target photo, lower is better, < 0.6 = same person (docs/evaluation.md; '-' where dlib was not"
+        " installed or some pair's cached scores predate it); seconds = mean wall time per fit.",
         "",
     ]
-    header = ("| | PSNR face | SSIM face | LPIPS face | PSNR full | SSIM full | LPIPS full | src PSNR face | s/fit |\n"
-              "|---|---|---|---|---|---|---|---|---|")
+    header = ("| | PSNR face | SSIM face | LPIPS face | PSNR full | SSIM full | LPIPS full | src PSNR face | ID dist"
+              " | s/fit |\n|---|---|---|---|---|---|---|---|---|---|")
     for title, rows in TABLES:
         lines += [f"### {title}", "", header] + [_row(out_dir, label, name) for label, name in rows] + [""]
     lines.append(f"_Written {time.strftime('%Y-%m-%d %H:%M')}._")

@@ -1,18 +1,22 @@
 """The texture-swap protocol (Sec. 4): fit source and target separately, re-render the target with its own
 geometry, pose and lights but the source's textures ("target synthesis"), and score both the source
 reconstruction and the target synthesis against the photos, over the face region h (our stand-in for
-the authors' face parsing) and over the full image composited as the authors did.
+the authors' face parsing) and over the full image composited as the authors did. When dlib is installed
+(``.[identity]``), each side also gets ``"identity": {"distance": d}``: the dlib descriptor distance between
+that full composite and the photo (:mod:`deface.eval.identity`; lower is better, < 0.6 = same person).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from deface.eval.metrics import mean_scores, score_images
+from deface.eval import identity
+from deface.eval.metrics import composite, mean_scores, score_images
 from deface.eval.pairs import Pair
 from deface.eval.report import PairScores, ReportRow
 from deface.export.files import save_png
@@ -35,30 +39,42 @@ def fit_side(paths: list[Path], config: FitConfig, models_dir, name: str, quiet:
     return fit(frames, config, models_dir=models_dir, source=name, video=len(frames) > 1, log=log)
 
 
+_IDENTITY = identity.IdentityScorer()  # dlib models load on first use, once per process
+
+
 def score_fit(result: FitResult, textures=None) -> tuple[dict, list[np.ndarray]]:
-    """Mean scores over frames of ``result`` re-rendered with ``textures``, and the sRGB outputs."""
+    """Mean scores over frames of ``result`` re-rendered with ``textures`` (plus ``"identity"`` when dlib is
+    installed and the photo has a face), and the sRGB outputs."""
     target = result.context.target
-    scores, outputs = [], []
+    scores, outputs, pasted = [], [], []
     for frame, rendered in enumerate(result.render(textures)):
         output = linear_to_srgb(_np(rendered.face).clip(0, 1))
         mask = _np(rendered.coverage * target.face_classifier[frame])
         scores.append(score_images(output, target.frames_srgb[frame], mask))
+        pasted.append(composite(output, target.frames_srgb[frame], mask))
         outputs.append(_np(result.composite(rendered, frame)))
-    return mean_scores(scores), outputs
+    mean = mean_scores(scores)
+    if identity.available():
+        found = identity.identity_scores(_IDENTITY, pasted, target.frames_srgb)
+        if found is not None:
+            mean["identity"] = found
+    return mean, outputs
 
 
 def evaluate_pair(pair: Pair, config: FitConfig, folder: Path, models_dir=None, quiet: bool = True) -> PairOutcome:
     """Fit both sides of ``pair``, score, and save the images the report shows into ``folder``."""
     import time
 
+    reason = identity.unavailable_reason()
+    if reason is not None:
+        warnings.warn(f"no identity scores: {reason}", stacklevel=2)
+
     started = time.perf_counter()
     source = fit_side(pair.source, config, models_dir, f"{pair.name}/source", quiet)
     target = fit_side(pair.target, config, models_dir, f"{pair.name}/target", quiet)
     seconds = (time.perf_counter() - started) / 2
     source_scores, source_outputs = score_fit(source)
-    target_scores, _ = score_fit(target)
     swap_scores, swap_outputs = score_fit(target, source.textures)
-    del target_scores
     images = _save_images(folder, source, target, source_outputs[0], swap_outputs[0])
     scores = PairScores(pair.name, source_scores, swap_scores)
     row = ReportRow(pair.name, images, {"source": source_scores, "target": swap_scores})

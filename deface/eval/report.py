@@ -10,6 +10,10 @@
 ``source`` scores the reconstruction of the source photo, ``target`` the target re-rendered with the
 source's textures (the paper's "target synthesis"). PSNR in dB, LPIPS x100. Non-finite values (PSNR of
 identical images is +inf) are written as ``null`` so the file stays strict JSON.
+
+Optional: a side's scores may also hold ``"identity": {"distance": d}`` (:mod:`deface.eval.identity`, dlib
+descriptor distance, lower is better). It is written for the pairs that have it, and its mean only when
+every pair has it (a mean over a subset of the pairs would not compare with the other columns).
 """
 
 from __future__ import annotations
@@ -26,7 +30,9 @@ from deface.eval.metrics import METRIC_NAMES, mean_scores
 
 SIDES = ("source", "target")
 REGIONS = ("face", "full")
-Scores = Mapping[str, Mapping[str, float]]  # {"face": {"psnr", "ssim", "lpips"}, "full": {...}}
+Scores = Mapping[str, Mapping[str, float]]  # {"face": {"psnr", "ssim", "lpips"}, "full": {...}[, "identity"]}
+IDENTITY = "identity"
+IDENTITY_NAMES = ("distance",)
 
 
 @dataclass(frozen=True)
@@ -50,9 +56,27 @@ def _check_scores(scores: Scores, where: str) -> dict[str, dict[str, float | Non
         for name in METRIC_NAMES:
             if name not in scores[region]:
                 raise ValueError(f"{where}.{region}: missing metric {name!r}")
-            value = float(scores[region][name])
-            out[region][name] = value if math.isfinite(value) else None
+            out[region][name] = _finite(scores[region][name])
+    if IDENTITY in scores:
+        missing = [name for name in IDENTITY_NAMES if name not in scores[IDENTITY]]
+        if missing:
+            raise ValueError(f"{where}.{IDENTITY}: missing {missing}")
+        out[IDENTITY] = {name: _finite(scores[IDENTITY][name]) for name in IDENTITY_NAMES}
     return out
+
+
+def _finite(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _mean_side(side_scores: Sequence[Scores], where: str) -> dict[str, dict[str, float | None]]:
+    mean = mean_scores(side_scores)
+    if all(IDENTITY in s for s in side_scores):
+        mean[IDENTITY] = {
+            name: sum(float(s[IDENTITY][name]) for s in side_scores) / len(side_scores) for name in IDENTITY_NAMES
+        }
+    return _check_scores(mean, where)
 
 
 def metrics_document(preset: str, pair_scores: Sequence[PairScores]) -> dict:
@@ -63,7 +87,7 @@ def metrics_document(preset: str, pair_scores: Sequence[PairScores]) -> dict:
         {"name": p.name, **{side: _check_scores(getattr(p, side), f"{p.name}.{side}") for side in SIDES}}
         for p in pair_scores
     ]
-    mean = {side: _check_scores(mean_scores([getattr(p, side) for p in pair_scores]), side) for side in SIDES}
+    mean = {side: _mean_side([getattr(p, side) for p in pair_scores], side) for side in SIDES}
     return {"preset": preset, "pairs": pairs, "mean": mean}
 
 
@@ -97,9 +121,13 @@ def _fmt(value: float | None) -> str:
 
 def _scores_table(scores: Mapping[str, Scores]) -> str:
     head = "".join(f"<th>{r} {m}</th>" for r in REGIONS for m in METRIC_NAMES)
+    with_identity = any(IDENTITY in side_scores for side_scores in scores.values())
+    head += "<th>ID dist</th>" if with_identity else ""
     rows = []
     for side, side_scores in scores.items():
         cells = "".join(f"<td>{_fmt(side_scores[r][m])}</td>" for r in REGIONS for m in METRIC_NAMES)
+        if with_identity:
+            cells += f"<td>{_fmt(side_scores.get(IDENTITY, {}).get('distance'))}</td>"
         rows.append(f"<tr><th>{html.escape(side)}</th>{cells}</tr>")
     return f"<table class='scores'><tr><th></th>{head}</tr>{''.join(rows)}</table>"
 
@@ -122,7 +150,9 @@ def write_index_html(path: str | Path, rows: Sequence[ReportRow], title: str = "
         "{border:1px solid #aaa;padding:2px 6px;text-align:right}",
         f"</style></head><body><h1>{html.escape(title)}</h1>",
         "<p>PSNR in dB, LPIPS x100. <b>face</b>: face-mask pixels only; <b>full</b>: mask&middot;output + "
-        "(1&minus;mask)&middot;input over the whole image (the authors' protocol).</p>",
+        "(1&minus;mask)&middot;input over the whole image (the authors' protocol). <b>ID dist</b> (when dlib is "
+        "installed): dlib face-descriptor distance of that composite to the photo, lower is better, &lt; 0.6 = "
+        "same person.</p>",
     ]
     for row in rows:
         parts.append(f"<section><h2>{html.escape(row.name)}</h2><div>")
