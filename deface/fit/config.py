@@ -125,6 +125,12 @@ class FitConfig:
     """Stage 3 updates textures through a 3x3 Gaussian (against texel aliasing; see stage3.TextureParameters).
     Off by default: on two benchmark pairs it improved the source fit (+1 dB) but not the texture transfer
     (target synthesis -0.3 and -1.0 dB; BENCHMARKS.md)."""
+    supersampling: int = 1
+    """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
+    render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between
+    pixel centres."""
+    render_blur: bool = True
+    """L_pho compares a 3x3-Gaussian-blurred render with the photo (the authors' code)."""
     shadows: bool = True
     """Ray-traced self-shadowing in the renderer."""
     shadow_rays: int = 128

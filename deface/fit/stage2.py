@@ -77,7 +77,8 @@ class StageContext:
 
     def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
         return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
-                                rendered.coverage, form=self.config.decouple.loss_form)
+                                rendered.coverage, blur=self.config.render_blur,
+                                form=self.config.decouple.loss_form)
 
 
 def run_stage2(context: StageContext) -> list[float]:

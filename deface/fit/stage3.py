@@ -19,6 +19,7 @@ from deface.losses.texture import texture_regularisers
 from deface.priors.global_prior import global_prior, kmeans_palette
 from deface.priors.local_prior import local_prior
 from deface.render.mesh import Textures
+from deface.render.supersample import box_filter, supersampled_camera
 
 
 @dataclass
@@ -26,7 +27,8 @@ class FrozenFrame:
     """A frame's stage-3 constants: geometry, ray-cast fragments, shadow transfer, M_o, reference albedo."""
 
     index: int  # frame number
-    geometry: object
+    geometry: object  # posed mesh and the working-resolution camera
+    camera: object  # the camera the fragments were cast with (config.supersampling x finer)
     fragments: object
     transfer: object
     face_region: torch.Tensor  # [H, W] M_o from stage 2
@@ -99,9 +101,7 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
 
 def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, object]:
     """Shade a frozen frame with ``textures`` and the current kept lights; M_o stays frozen."""
-    geometry = frame.geometry
-    output = context.renderer.shade(geometry.mesh, geometry.camera, frame.fragments, textures,
-                                    context.scene.lights[context.decoupling.kept], frame.transfer)
+    output = _shade(context, frame.geometry.mesh, frame.camera, frame.fragments, textures, frame.transfer)
     rendered = context.compose(frame.index, output.images, output.mask)
     rendered.face_region = frame.face_region
     return rendered, output
@@ -120,14 +120,21 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
             geometry.camera.focal.detach(), geometry.camera.rotation.detach(),
             geometry.camera.translation.detach(), geometry.camera.width, geometry.camera.height),
     )
-    fragments = context.renderer.rasterize(geometry.mesh, geometry.camera)
+    camera = supersampled_camera(geometry.camera, context.config.supersampling)
+    fragments = context.renderer.rasterize(geometry.mesh, camera)
     transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.shadows else None
-    output = context.renderer.shade(geometry.mesh, geometry.camera, fragments, initial,
-                                    context.scene.lights[context.decoupling.kept], transfer)
+    output = _shade(context, geometry.mesh, camera, fragments, initial, transfer)
     coverage = output.mask
     face_region = context.decoupling.face_region(frame, coverage, context.target.face_classifier[frame])
     reference = {"diffuse": output.diffuse, "specular": output.specular, "roughness": output.roughness}
-    return FrozenFrame(frame, geometry, fragments, transfer, face_region.detach(), reference)
+    return FrozenFrame(frame, geometry, camera, fragments, transfer, face_region.detach(), reference)
+
+
+def _shade(context: StageContext, mesh, camera, fragments, textures: Textures, transfer):
+    """Shade under the kept lights, box-filtered to the working resolution."""
+    output = context.renderer.shade(mesh, camera, fragments, textures,
+                                    context.scene.lights[context.decoupling.kept], transfer)
+    return box_filter(output, context.config.supersampling)
 
 
 def _topology(context: StageContext):
