@@ -22,15 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from deface.render import kernels
 from deface.render.camera import Camera
-from deface.render.mesh import Mesh, Textures, sample_texture
+from deface.render.mesh import Mesh, Textures, sample_textures
 from deface.render.raycast import RayScene
-from deface.render.sh import (
-    cosine_lobe_coefficients,
-    phong_lobe_filter,
-    sh_basis_rows,
-    sh_filtered_radiance,
-)
+from deface.render.sh import cosine_lobe_band, phong_lobe_filter, sh_band_sums
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 
@@ -203,14 +199,12 @@ class Renderer:
 
         uv_corners = mesh.triangle_uvs[fragments.triangle_id.reshape(-1)[covered]]  # [N, 3]
         uv = _interpolate(mesh.uvs.to(dtype), uv_corners, bary)  # [N, 2]
-        # one bilinear lookup for all maps: grid_sample's cost is mostly per sample, not per channel
-        stacked = torch.cat([textures.diffuse, textures.specular, textures.roughness], -1)  # [Ht, Wt, 7]
-        diffuse, specular, roughness = sample_texture(stacked, uv).split([3, 3, 1], 1)
+        diffuse, specular, roughness = sample_textures([textures.diffuse, textures.specular, textures.roughness], uv)
 
         radiance = irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]  # [N, K, 3]
         if self.config.specular:
             lobe = phong_lobe_filter(roughness[:, 0], bands).to(dtype)  # [N, B], per-texel roughness
-            lit = _FilteredInterpolation.apply(bands_v, local, bary, lobe)  # [N, K*3]
+            lit = _filtered_interpolation(bands_v, local, bary, lobe)  # [N, K*3]
             if transfer is not None:
                 lit = lit * pixel_values[3]
             radiance = radiance + lit.reshape(-1, num_lights, 3) * specular[:, None]
@@ -272,9 +266,8 @@ def _vertex_irradiance(
 
     ``subset`` [U] (long) are the mesh vertices the normals belong to (None: all V vertices, U = V).
     """
-    lobe = cosine_lobe_coefficients(bands).to(device=coeffs.device, dtype=coeffs.dtype)
-    lobe = lobe[[l * l for l in range(bands)]].expand(normals.shape[0], bands)  # A_l, [V, B]
-    irradiance = sh_filtered_radiance(normals, lobe, coeffs)  # [V, K*3] unshadowed, analytic
+    lobe = torch.tensor([cosine_lobe_band(l) for l in range(bands)], dtype=coeffs.dtype, device=coeffs.device)
+    irradiance = (sh_band_sums(normals, coeffs) * lobe[:, None]).sum(1)  # [V, K*3] unshadowed, sum_l A_l S_l
     if transfer is not None:
         occluded = transfer.occluded
         num_vertices = normals.shape[0] if subset is None else None
@@ -341,17 +334,46 @@ def _specular_bands(
     view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [U, 3] towards the camera
     reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [U, 3]
     reflected = reflected / reflected.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # unit for the SH
-    basis = sh_basis_rows(reflected.to(coeffs.dtype), bands)  # [B², U]
-    sums = [basis[l * l : (l + 1) ** 2].T @ coeffs[l * l : (l + 1) ** 2] for l in range(bands)]  # [U, C]
-    return torch.cat(sums, 1)
+    return sh_band_sums(reflected.to(coeffs.dtype), coeffs).reshape(positions.shape[0], -1)
+
+
+def _filtered_interpolation(
+    values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor, lobe: torch.Tensor
+) -> torch.Tensor:
+    """out[p] = sum_i sum_l bary[p, i] lobe[p, l] S[corner_i(p), l]: values S [U, B*C] (band-major),
+    corners [N, 3], bary [N, 3], lobe [N, B] -> [N, C]. numba kernel on the CPU, sparse torch elsewhere."""
+    if kernels.enabled(values, bary, lobe) and values.dtype == bary.dtype == lobe.dtype:
+        return _KernelInterpolation.apply(values, corners, bary, lobe)
+    return _FilteredInterpolation.apply(values, corners, bary, lobe)
+
+
+class _KernelInterpolation(torch.autograd.Function):
+    """The numba path of ``_filtered_interpolation`` (kernels.py); no sparse matrices, no [N, B*C] buffers."""
+
+    @staticmethod
+    def forward(ctx, values, corners, bary, lobe):
+        ctx.save_for_backward(values, corners, bary, lobe)
+        return kernels.interpolate_forward(values.reshape(values.shape[0], lobe.shape[1], -1), corners, bary, lobe)
+
+    @staticmethod
+    def backward(ctx, grad):
+        values, corners, bary, lobe = ctx.saved_tensors
+        per_band = values.reshape(values.shape[0], lobe.shape[1], -1)  # [U, B, C]
+        grad_values = grad_bary = grad_lobe = None
+        if ctx.needs_input_grad[2] or ctx.needs_input_grad[3]:
+            grad_bary, grad_lobe = kernels.interpolate_backward_corners(per_band, corners, bary, lobe, grad)
+        if ctx.needs_input_grad[0]:
+            grad_values = kernels.interpolate_backward_values(per_band.shape[0], corners, bary, lobe, grad)
+            grad_values = grad_values.reshape(values.shape)
+        return grad_values, None, grad_bary, grad_lobe
 
 
 class _FilteredInterpolation(torch.autograd.Function):
-    """out[p] = sum_i sum_l bary[p, i] lobe[p, l] S[corner_i(p), l]: per-band vertex values S [U, B*C]
-    (band-major), corners [N, 3], bary [N, 3], lobe [N, B] -> [N, C].
+    """Reference (torch) path of ``_filtered_interpolation``: a sparse [N, U*B] matrix with 3B weights
+    bary[p, i] lobe[p, l] per pixel times S viewed as [U*B, C].
 
-    A sparse [N, U*B] matrix with 3B weights per pixel times S viewed as [U*B, C]: no [N, B*C] per-pixel
-    buffer is materialised in the forward pass (such buffers cost more in page faults than in arithmetic).
+    No [N, B*C] per-pixel buffer is materialised in the forward pass (such buffers cost more in page
+    faults than in arithmetic).
     """
 
     @staticmethod
@@ -437,6 +459,8 @@ def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.
 
 def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
     """sum_i bary_i values[corners_i]: values [V, C], corners [N, 3], bary [N, 3] -> [N, C]."""
+    if kernels.enabled(values, bary) and values.dtype == bary.dtype:
+        return _KernelInterpolation.apply(values, corners, bary, bary.new_ones(bary.shape[0], 1))
     out = values.index_select(0, corners[:, 0]) * bary[:, :1]
     out = out + values.index_select(0, corners[:, 1]) * bary[:, 1:2]
     return out + values.index_select(0, corners[:, 2]) * bary[:, 2:3]

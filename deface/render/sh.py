@@ -23,6 +23,8 @@ from functools import lru_cache
 
 import torch
 
+from deface.render import kernels
+
 
 @lru_cache(maxsize=64)
 def _recurrence_constants(bands: int) -> tuple[list[float], list[tuple[list[float], list[float]]]]:
@@ -115,11 +117,15 @@ class _SHBasis(torch.autograd.Function):
     def forward(ctx, directions: torch.Tensor, bands: int) -> torch.Tensor:
         ctx.bands = bands
         ctx.save_for_backward(directions)
+        if kernels.enabled(directions):  # the same recurrences, one loop per direction
+            return kernels.sh_basis_forward(directions, _kernel_constants(bands)).T
         return _sh_rows_forward(directions, bands)
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):
         (directions,) = ctx.saved_tensors
+        if kernels.enabled(directions, grad):
+            return kernels.sh_basis_backward(directions, grad.T, _kernel_constants(ctx.bands)), None
         return _sh_rows_vjp(directions, grad, ctx.bands), None
 
 
@@ -158,52 +164,24 @@ def _sh_rows_vjp(directions: torch.Tensor, grad: torch.Tensor, bands: int) -> to
     return torch.stack([gx, gy, gz], -1)
 
 
-def sh_filtered_radiance(
-    directions: torch.Tensor, band_filter: torch.Tensor, coeffs: torch.Tensor
-) -> torch.Tensor:
-    """sum_lm f_l c_lm Y_lm(w): directions [N, 3], per-point band filter [N, B], coeffs [B², C] -> [N, C].
+def sh_band_sums(directions: torch.Tensor, coeffs: torch.Tensor) -> torch.Tensor:
+    """Per-band sums S_l(w) = sum_m c_lm Y_lm(w): unit directions [N, 3], coeffs [B², C] -> [N, B, C].
 
-    One fused op with an analytic backward (to directions, filter and coefficients): the work horse of
-    irradiance (f_l = A_l) and of the filtered specular lobe (f_l = Lambda_l). Much cheaper than
-    autograd over sh_basis for tens of thousands of points.
+    Any band-filtered radiance is sum_l f_l S_l(w) (irradiance: f_l = A_l; Phong specular: f_l =
+    Lambda_l).
     """
-    bands = band_filter.shape[-1]
-    if coeffs.shape[0] != bands * bands or directions.shape[0] != band_filter.shape[0]:
-        raise ValueError(
-            f"sh_filtered_radiance: got directions {tuple(directions.shape)}, "
-            f"filter {tuple(band_filter.shape)}, coeffs {tuple(coeffs.shape)}"
-        )
-    return _FilteredRadiance.apply(directions, band_filter, coeffs)
+    bands = math.isqrt(coeffs.shape[0])
+    if bands < 1 or bands * bands != coeffs.shape[0] or directions.ndim != 2 or directions.shape[1] != 3:
+        raise ValueError(f"sh_band_sums: got directions {tuple(directions.shape)}, coeffs {tuple(coeffs.shape)}")
+    sizes = [2 * l + 1 for l in range(bands)]
+    # split, not slicing: the backward of a split is one cat, that of each slice a full-size zero buffer
+    rows, blocks = sh_basis_rows(directions, bands).split(sizes), coeffs.split(sizes)  # [2l+1, N], [2l+1, C]
+    return torch.stack([row.T @ block for row, block in zip(rows, blocks, strict=True)], 1)
 
 
-class _FilteredRadiance(torch.autograd.Function):
-    @staticmethod
-    def forward(ctx, directions, band_filter, coeffs):
-        bands = band_filter.shape[-1]
-        index = band_of_index(bands, directions.device)
-        basis = _sh_rows_forward(directions, bands)  # [B², N]
-        weights = band_filter.T.contiguous()[index]  # [B², N]
-        filtered = basis * weights
-        ctx.bands = bands
-        ctx.save_for_backward(directions, basis, weights, coeffs)
-        return filtered.T @ coeffs
-
-    @staticmethod
-    def backward(ctx, grad):
-        directions, basis, weights, coeffs = ctx.saved_tensors
-        bands = ctx.bands
-        grad = grad.contiguous()
-        grad_filtered = coeffs @ grad.T  # [B², N]
-        grad_dirs = grad_filter = grad_coeffs = None
-        if ctx.needs_input_grad[2]:
-            grad_coeffs = (basis * weights) @ grad  # [B², C]
-        if ctx.needs_input_grad[1]:
-            index = band_of_index(bands, directions.device)
-            per_coeff = grad_filtered * basis  # [B², N]
-            grad_filter = per_coeff.new_zeros(bands, per_coeff.shape[1]).index_add_(0, index, per_coeff).T
-        if ctx.needs_input_grad[0]:
-            grad_dirs = _sh_rows_vjp(directions, grad_filtered * weights, bands)
-        return grad_dirs, grad_filter, grad_coeffs
+@lru_cache(maxsize=64)
+def _kernel_constants(bands: int):
+    return kernels.sh_constants(*_recurrence_constants(bands))
 
 
 def band_of_index(bands: int, device: torch.device | None = None) -> torch.Tensor:
