@@ -47,8 +47,10 @@ def pairs_command(
         outcome = evaluate_pair(pair, config, output / pair.name, models)
         outcomes.append(outcome)
         target = outcome.scores.target["face"]
+        distance = outcome.scores.target.get("identity", {}).get("distance")
+        identity = "" if distance is None else f", identity distance {distance:.3f}"
         console.print(f"  target synthesis (face): PSNR {target['psnr']:.2f} dB, SSIM {target['ssim']:.3f}, "
-                      f"LPIPS {target['lpips']:.2f}; {outcome.seconds_per_fit:.0f} s per fit")
+                      f"LPIPS {target['lpips']:.2f}{identity}; {outcome.seconds_per_fit:.0f} s per fit")
     write_metrics_json(output / "metrics.json", config.preset, [o.scores for o in outcomes])
     write_index_html(output / "index.html", [o.row for o in outcomes], title=f"deface eval: {config.preset}")
     console.print(f"wrote {output / 'metrics.json'} and {output / 'index.html'}")
