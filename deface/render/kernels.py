@@ -115,6 +115,23 @@ def bilinear_backward(texture: torch.Tensor, uv: torch.Tensor, grad: torch.Tenso
     )
 
 
+# -- radiance of the covered pixels -----------------------------------------------------------------
+def radiance_forward(irradiance, diffuse, lit, visibility, specular) -> torch.Tensor:
+    """irradiance [N, K*3] * diffuse [N, 3] / pi + lit [N, K*3] * visibility [N, 1] * specular [N, 3]."""
+    out = np.empty(tuple(irradiance.shape), dtype=_array(irradiance).dtype)
+    arrays = [_array(t) for t in (irradiance, diffuse, lit, visibility, specular)]
+    _pick(_radiance_forward)(*arrays, out)
+    return torch.from_numpy(out)
+
+
+def radiance_backward(irradiance, diffuse, lit, visibility, specular, grad) -> list[torch.Tensor]:
+    """Gradients of ``radiance_forward`` to its five inputs (same shapes)."""
+    arrays = [_array(t) for t in (irradiance, diffuse, lit, visibility, specular)]
+    grads = [np.empty(a.shape, dtype=a.dtype) for a in arrays]
+    _pick(_radiance_backward)(*arrays, _array(grad), *grads)
+    return [torch.from_numpy(g) for g in grads]
+
+
 # -- SH band sums ---------------------------------------------------------------------------------
 _SH_CHUNK = 256  # directions per parallel block (each block allocates its own work arrays once)
 
@@ -277,6 +294,29 @@ if numba is not None:
                 d_fy += grad[p, c] * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
             grad_uv[p, 0] = d_fx * slope_x
             grad_uv[p, 1] = -d_fy * slope_y  # y = (1 - v) * Ht - 0.5
+
+    @_serial_and_parallel
+    def _radiance_forward(irradiance, diffuse, lit, visibility, specular, out):
+        for p in prange(out.shape[0]):
+            for j in range(out.shape[1]):
+                c = j % 3
+                out[p, j] = irradiance[p, j] * (diffuse[p, c] / np.pi) + lit[p, j] * visibility[p, 0] * specular[p, c]
+
+    @_serial_and_parallel
+    def _radiance_backward(irradiance, diffuse, lit, visibility, specular, grad, g_irr, g_diff, g_lit, g_vis, g_spec):
+        for p in prange(grad.shape[0]):
+            g_vis[p, 0] = 0.0
+            for c in range(3):
+                g_diff[p, c] = 0.0
+                g_spec[p, c] = 0.0
+            for j in range(grad.shape[1]):
+                c = j % 3
+                g = grad[p, j]
+                g_irr[p, j] = g * (diffuse[p, c] / np.pi)
+                g_diff[p, c] += g * irradiance[p, j] / np.pi
+                g_lit[p, j] = g * visibility[p, 0] * specular[p, c]
+                g_vis[p, 0] += g * lit[p, j] * specular[p, c]
+                g_spec[p, c] += g * lit[p, j] * visibility[p, 0]
 
     @njit(inline="always")
     def _sh_rows_at(direction, constants, scratch, basis, d_basis, derivative):

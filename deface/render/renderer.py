@@ -148,8 +148,7 @@ class Renderer:
         ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
         flat = (ys * width + xs).reshape(-1)
         origins, directions = _pixel_rays(camera, xs.reshape(-1) + 0.5, ys.reshape(-1) + 0.5)
-        hit, _ = self.ray_scene(mesh).intersect(origins, directions)
-        triangle_id[flat] = hit
+        triangle_id[flat] = self.ray_scene(mesh).first_triangles(origins, directions)
         return triangle_id
 
     def shadow_transfer(self, mesh: Mesh) -> ShadowTransfer:
@@ -201,14 +200,13 @@ class Renderer:
         uv = _interpolate(mesh.uvs.to(dtype), uv_corners, bary)  # [N, 2]
         diffuse, specular, roughness = sample_textures([textures.diffuse, textures.specular, textures.roughness], uv)
 
-        radiance = irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]  # [N, K, 3]
         if self.config.specular:
             lobe = phong_lobe_filter(roughness[:, 0], bands).to(dtype)  # [N, B], per-texel roughness
             lit = _filtered_interpolation(bands_v, local, bary, lobe)  # [N, K*3]
-            if transfer is not None:
-                lit = lit * pixel_values[3]
-            radiance = radiance + lit.reshape(-1, num_lights, 3) * specular[:, None]
-        radiance = radiance.reshape(-1, num_lights * 3)
+            visibility = pixel_values[3] if transfer is not None else lit.new_ones(lit.shape[0], 1)
+            radiance = _radiance(irradiance, diffuse, lit, visibility, specular)  # [N, K*3]
+        else:
+            radiance = (irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]).flatten(1)
 
         def screen(values: torch.Tensor) -> torch.Tensor:  # [N, C] -> [H, W, C], zeros elsewhere
             full = torch.zeros(height * width, values.shape[1], dtype=values.dtype, device=values.device)
@@ -335,6 +333,30 @@ def _specular_bands(
     reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [U, 3]
     reflected = reflected / reflected.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # unit for the SH
     return sh_band_sums(reflected.to(coeffs.dtype), coeffs).reshape(positions.shape[0], -1)
+
+
+def _radiance(irradiance, diffuse, lit, visibility, specular) -> torch.Tensor:
+    """Diffuse plus shadowed specular radiance of the covered pixels, [N, K*3]:
+    irradiance [N, K*3] * diffuse [N, 3] / pi + lit [N, K*3] * visibility [N, 1] * specular [N, 3]."""
+    inputs = (irradiance, diffuse, lit, visibility, specular)
+    if kernels.enabled(*inputs) and len({t.dtype for t in inputs}) == 1:
+        return _KernelRadiance.apply(*inputs)
+    num = irradiance.shape[0]
+    diffuse_part = irradiance.reshape(num, -1, 3) * (diffuse / math.pi)[:, None]
+    return (diffuse_part + (lit * visibility).reshape(num, -1, 3) * specular[:, None]).reshape(num, -1)
+
+
+class _KernelRadiance(torch.autograd.Function):
+    """The numba path of ``_radiance``: one pass per pixel instead of broadcasts and [N, K, 3] reductions."""
+
+    @staticmethod
+    def forward(ctx, *inputs):
+        ctx.save_for_backward(*inputs)
+        return kernels.radiance_forward(*inputs)
+
+    @staticmethod
+    def backward(ctx, grad):
+        return tuple(kernels.radiance_backward(*ctx.saved_tensors, grad))
 
 
 def _filtered_interpolation(
@@ -467,15 +489,19 @@ def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor
 
 
 def _pixel_rays(camera: Camera, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Model-frame rays through pixel positions (x right, y down): origins [N, 3], unit directions [N, 3]."""
+    """Model-frame rays through pixel positions (x right, y down): origins [N, 3], unit directions [N, 3].
+
+    float32, Embree's precision: the directions are built in it directly (no float64 copies).
+    """
     focal = float(camera.focal.detach())
-    dirs_cam = np.stack(
-        [(xs - camera.width / 2) / focal, (ys - camera.height / 2) / focal, np.ones_like(xs)], -1
-    )
-    rot = camera.rotation_matrix.detach().double().cpu().numpy()
+    dirs_cam = np.empty((xs.shape[0], 3), dtype=np.float32)
+    dirs_cam[:, 0] = (xs - camera.width / 2) / focal
+    dirs_cam[:, 1] = (ys - camera.height / 2) / focal
+    dirs_cam[:, 2] = 1.0
+    rot = camera.rotation_matrix.detach().cpu().numpy().astype(np.float32)
     dirs = dirs_cam @ rot  # camera -> model: R^T d
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    origin = camera.center_in_model().detach().double().cpu().numpy()
+    origin = camera.center_in_model().detach().cpu().numpy().astype(np.float32)
     return np.broadcast_to(origin, dirs.shape), dirs
 
 
