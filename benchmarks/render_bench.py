@@ -5,8 +5,11 @@ textures, SH and vertices), the time of one shadow-transfer refresh, the primary
 peak memory. Usage:
 
     DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/render_bench.py [--repeats 20] [--threads 1]
+        [--kernels numba|torch]
 
-The machine is shared: the script reports the median and the minimum over repeats, and the load average.
+The machine is shared: the script reports the median and the minimum over repeats, and the load average;
+for the 256² step also the CPU time of the calling thread (stable under load with --threads 1; numba's
+and Embree's worker threads are not in it). ``--kernels torch`` measures the torch reference path.
 """
 
 from __future__ import annotations
@@ -20,20 +23,21 @@ import time
 import torch
 
 from deface.models.ict import load_ict
+from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import RenderConfig, Renderer
 
 
-def timed(fn, repeats: int) -> tuple[float, float]:
-    """(median, min) wall-clock ms of fn() over repeats, after two warm-up calls."""
+def timed(fn, repeats: int, clock=time.perf_counter) -> tuple[float, float]:
+    """(median, min) ms of fn() over repeats on ``clock`` (wall clock by default), after two warm-up calls."""
     for _ in range(2):
         fn()
     samples = []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start = clock()
         fn()
-        samples.append(1000 * (time.perf_counter() - start))
+        samples.append(1000 * (clock() - start))
     return statistics.median(samples), min(samples)
 
 
@@ -58,10 +62,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
+    parser.add_argument("--kernels", choices=["numba", "torch"], default="numba", help="renderer kernels")
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)  # on a busy shared machine 1 thread is far more stable
-    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, load average {os.getloadavg()}")
+    with kernels.backend(args.kernels):
+        run(args)
+
+
+def run(args) -> None:
+    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, kernels {args.kernels} "
+          f"(numba {'present' if kernels.numba is not None else 'missing'}), load average {os.getloadavg()}")
 
     renderer = Renderer(RenderConfig())
     mesh, _, _, _ = scene(256)
@@ -85,6 +96,9 @@ def main() -> None:
         print(f"{resolution}x{resolution}, 5 lights, {covered} covered pixels: "
               f"rasterize {raster[0]:.1f} ms (min {raster[1]:.1f}); forward {forward[0]:.1f} ms "
               f"(min {forward[1]:.1f}); forward+backward {both[0]:.1f} ms (min {both[1]:.1f})")
+        if resolution == 256:
+            cpu = timed(step, args.repeats, clock=time.thread_time)
+            print(f"    forward+backward CPU time of the calling thread {cpu[0]:.1f} ms (min {cpu[1]:.1f})")
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak resident memory {peak_mb:.0f} MB (ru_maxrss, whole process incl. torch)")
 

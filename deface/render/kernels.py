@@ -1,9 +1,11 @@
-"""Fused per-pixel kernels (numba) for the renderer's hot loops: corner interpolation and bilinear lookup.
+"""Fused numba kernels for the renderer's hot loops: barycentrics, corner interpolation (plain and
+band-filtered), bilinear texture lookup, per-pixel radiance, SH basis rows; each with its backward.
 
-Each kernel has a torch reference path (renderer.py / mesh.py); these are the fast CPU path, used for CPU
-tensors when numba is importable and ``DEFACE_RENDER_KERNELS`` is not ``torch``. Why: the torch versions
-spend most of their time in ~100 small ops and dense [N, B*C] temporaries; one loop per pixel needs
-neither (the renderer's step at 256² went from ~107 to see benchmarks/render.md).
+Each kernel has a torch reference path next to its caller (renderer.py, mesh.py, sh.py); these are the
+fast CPU path, used for CPU tensors when numba is importable and ``DEFACE_RENDER_KERNELS`` is not
+``torch`` (tests/test_render_kernels.py checks both paths agree). Why: the torch versions spend their time
+in hundreds of small ops, broadcasts and [N, B*C] temporaries; one loop per pixel needs neither (figures
+in benchmarks/render.md).
 
 Determinism: every output element is written by exactly one loop iteration in a fixed order. Gradients
 that scatter to vertices are computed in *gather* form (for each vertex, its (pixel, corner) entries
@@ -113,6 +115,24 @@ def bilinear_backward(texture: torch.Tensor, uv: torch.Tensor, grad: torch.Tenso
         None if grad_texture is None else torch.from_numpy(grad_texture),
         None if grad_uv is None else torch.from_numpy(grad_uv),
     )
+
+
+# -- perspective-correct barycentrics ---------------------------------------------------------------
+def barycentrics_forward(corners_px: torch.Tensor, depth: torch.Tensor, centres: torch.Tensor) -> torch.Tensor:
+    """Barycentrics [N, 3] of pixel centres [N, 2] in triangles with projected corners [N, 3, 2] and
+    camera depths [N, 3] (renderer._barycentrics' formula)."""
+    p = _array(corners_px)
+    out = np.empty((p.shape[0], 3), dtype=p.dtype)
+    _pick(_barycentrics_forward)(p, _array(depth), _array(centres), np.finfo(p.dtype).tiny, out)
+    return torch.from_numpy(out)
+
+
+def barycentrics_backward(corners_px, depth, centres, grad) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gradients of ``barycentrics_forward`` to the projected corners [N, 3, 2] and depths [N, 3]."""
+    p, z = _array(corners_px), _array(depth)
+    grad_p, grad_z = np.empty(p.shape, dtype=p.dtype), np.empty(z.shape, dtype=z.dtype)
+    _pick(_barycentrics_backward)(p, z, _array(centres), np.finfo(p.dtype).tiny, _array(grad), grad_p, grad_z)
+    return torch.from_numpy(grad_p), torch.from_numpy(grad_z)
 
 
 # -- radiance of the covered pixels -----------------------------------------------------------------
@@ -294,6 +314,63 @@ if numba is not None:
                 d_fy += grad[p, c] * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
             grad_uv[p, 0] = d_fx * slope_x
             grad_uv[p, 1] = -d_fy * slope_y  # y = (1 - v) * Ht - 0.5
+
+    @njit(inline="always")
+    def _edge_functions(p, q):
+        """Corner offsets d_i = p_i - q [3, 2] and s_i = cross(d_{i+1}, d_{i+2}) [3] (~2 x sub-areas)."""
+        d = np.empty((3, 2), dtype=p.dtype)
+        for i in range(3):
+            d[i, 0], d[i, 1] = p[i, 0] - q[0], p[i, 1] - q[1]
+        screen = np.empty(3, dtype=p.dtype)
+        for i in range(3):
+            j, k = (i + 1) % 3, (i + 2) % 3
+            screen[i] = d[j, 0] * d[k, 1] - d[j, 1] * d[k, 0]
+        return d, screen
+
+    @_serial_and_parallel
+    def _barycentrics_forward(corners_px, depth, centres, tiny, out):
+        for n in prange(out.shape[0]):
+            _, screen = _edge_functions(corners_px[n], centres[n])
+            area = screen[0] + screen[1] + screen[2]
+            if abs(area) < tiny:
+                area = tiny
+            w0 = screen[0] / area / depth[n, 0]
+            w1 = screen[1] / area / depth[n, 1]
+            w2 = screen[2] / area / depth[n, 2]
+            total = w0 + w1 + w2
+            out[n, 0], out[n, 1], out[n, 2] = w0 / total, w1 / total, w2 / total
+
+    @_serial_and_parallel
+    def _barycentrics_backward(corners_px, depth, centres, tiny, grad, grad_p, grad_z):
+        for n in prange(grad.shape[0]):
+            d, screen = _edge_functions(corners_px[n], centres[n])
+            area = screen[0] + screen[1] + screen[2]
+            degenerate = abs(area) < tiny
+            if degenerate:
+                area = tiny
+            w = np.empty(3, dtype=screen.dtype)
+            for i in range(3):
+                w[i] = screen[i] / area / depth[n, i]
+            total = w[0] + w[1] + w[2]
+            mean = (grad[n, 0] * w[0] + grad[n, 1] * w[1] + grad[n, 2] * w[2]) / total
+            grad_area = 0.0
+            g_screen = np.empty(3, dtype=screen.dtype)
+            for i in range(3):
+                h = (grad[n, i] - mean) / total  # d loss / d w_i
+                grad_z[n, i] = -h * w[i] / depth[n, i]
+                g_screen[i] = h / area / depth[n, i]
+                grad_area -= h * w[i] / area
+            if degenerate:
+                grad_area = 0.0
+            for i in range(3):
+                grad_p[n, i, 0], grad_p[n, i, 1] = 0.0, 0.0
+            for i in range(3):  # s_i = d_j.x d_k.y - d_j.y d_k.x
+                j, k = (i + 1) % 3, (i + 2) % 3
+                g = g_screen[i] + grad_area
+                grad_p[n, j, 0] += g * d[k, 1]
+                grad_p[n, j, 1] -= g * d[k, 0]
+                grad_p[n, k, 0] -= g * d[j, 1]
+                grad_p[n, k, 1] += g * d[j, 0]
 
     @_serial_and_parallel
     def _radiance_forward(irradiance, diffuse, lit, visibility, specular, out):

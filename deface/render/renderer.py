@@ -466,6 +466,8 @@ def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.
     z = depth.index_select(0, flat).reshape(-1, 3)  # [N, 3]
     width = camera.width
     q = torch.stack([covered % width, covered // width], -1).to(p.dtype) + 0.5  # [N, 2]
+    if kernels.enabled(p, z) and p.dtype == z.dtype:
+        return _KernelBarycentrics.apply(p, z, q)
 
     def cross2(a, b):
         return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
@@ -477,6 +479,19 @@ def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.
     area = torch.where(area.abs() < tiny, torch.full_like(area, tiny), area)
     weights = screen / area / z  # perspective correction: screen barycentrics / depth
     return weights / weights.sum(-1, keepdim=True)
+
+
+class _KernelBarycentrics(torch.autograd.Function):
+    """The numba path of ``_barycentrics``: projected corners [N, 3, 2], depths [N, 3], centres [N, 2]."""
+
+    @staticmethod
+    def forward(ctx, corners_px, depth, centres):
+        ctx.save_for_backward(corners_px, depth, centres)
+        return kernels.barycentrics_forward(corners_px, depth, centres)
+
+    @staticmethod
+    def backward(ctx, grad):
+        return (*kernels.barycentrics_backward(*ctx.saved_tensors, grad), None)
 
 
 def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
