@@ -63,7 +63,7 @@ class Weights:
     identity_prior: float = 1e-3
     expression_prior: float = 1e-3
     texture_regulariser: float = 0.2
-    """Stage-3 NextFace-style texture regularisers (symmetry, closeness to T^0, smoothness), scaled by this."""
+    """Scale of the stage-3 NextFace texture regularisers (deface/losses/texture.py; 0.2 in the authors' code)."""
 
 
 @dataclass(frozen=True)

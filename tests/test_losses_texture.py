@@ -1,0 +1,97 @@
+"""Stage-3 texture regularisers (deface/losses/texture.py) against hand-computed values."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from deface.losses.texture import (
+    MapWeights,
+    chromaticity,
+    map_regulariser,
+    neighbour_smoothness,
+    texture_regularisers,
+)
+from deface.render.mesh import Textures
+
+SIZE = 8
+ONES = torch.ones(SIZE, SIZE)
+
+
+def only(**weights) -> MapWeights:
+    return MapWeights(**{"symmetry": 0.0, "reference": 0.0, "chromaticity": 0.0, "smoothness": 0.0, **weights})
+
+
+def test_no_change_from_a_symmetric_smooth_reference_costs_nothing():
+    reference = torch.full((SIZE, SIZE, 3), 0.4)
+    weights = MapWeights(symmetry=300, reference=100, chromaticity=100, smoothness=0.001, grey=0.0)
+    assert float(map_regulariser(reference.clone(), reference, ONES, weights)) == 0.0
+
+
+def test_symmetry_is_the_mean_difference_between_the_halves():
+    texture = torch.full((SIZE, SIZE, 3), 0.2)
+    texture[:, SIZE // 2:] = 0.5  # right half brighter: every texel differs from its mirror by 0.3
+    loss = map_regulariser(texture, texture, ONES, only(symmetry=1.0))
+    assert float(loss) == pytest.approx(0.3, rel=1e-6)
+
+
+def test_symmetry_ignores_texels_whose_mirror_is_off_the_face():
+    texture = torch.rand(SIZE, SIZE, 3, generator=torch.Generator().manual_seed(0))
+    mask = ONES.clone()
+    mask[:, : SIZE // 2] = 0  # only one side is face: nothing to compare with
+    assert float(map_regulariser(texture, texture, mask, only(symmetry=1.0))) == 0.0
+
+
+def test_reference_term_is_the_l1_distance_over_the_mask_divided_by_all_values():
+    reference = torch.full((SIZE, SIZE, 3), 0.4)
+    mask = ONES.clone()
+    mask[: SIZE // 2] = 0  # half the map is off the face
+    loss = map_regulariser(reference + 0.1, reference, mask, only(reference=1.0))
+    assert float(loss) == pytest.approx(0.05, rel=1e-5)
+
+
+def test_chromaticity_sees_hue_but_barely_brightness():
+    white = torch.tensor([1.0, 1.0, 1.0])
+    assert chromaticity(white).tolist() == pytest.approx([0.3127, 0.3290], abs=2e-3)  # D65 white point
+    reference = torch.full((SIZE, SIZE, 3), 0.4)
+    darker = map_regulariser(reference * 0.7, reference, ONES, only(chromaticity=1.0))
+    redder = reference * torch.tensor([1.0, 0.7, 0.7])
+    hue = map_regulariser(redder, reference, ONES, only(chromaticity=1.0))
+    assert float(darker) < 0.1 * float(hue)  # only the 1 in the denominator sees brightness
+
+
+def test_smoothness_of_a_checkerboard_counts_every_neighbour_pair():
+    step = 0.1
+    board = (torch.arange(SIZE)[:, None] + torch.arange(SIZE)[None, :]) % 2 * step
+    texture = board[..., None].expand(SIZE, SIZE, 3)
+    pairs = 2 * SIZE * (SIZE - 1)
+    assert float(neighbour_smoothness(texture, ONES)) == pytest.approx(pairs * 3 * step**2, rel=1e-5)
+    assert float(neighbour_smoothness(torch.full((SIZE, SIZE, 3), 0.3), ONES)) == 0.0
+
+
+def test_grey_term_sums_the_deviation_from_the_channel_mean():
+    texture = torch.zeros(SIZE, SIZE, 3)
+    texture[..., 0] = 0.3  # mean 0.1: deviations 0.2, -0.1, -0.1
+    loss = map_regulariser(texture, texture, ONES, only(grey=1.0))
+    assert float(loss) == pytest.approx(SIZE * SIZE * (0.04 + 0.01 + 0.01), rel=1e-5)
+
+
+def test_a_one_sided_dark_patch_costs_more_than_the_same_patch_on_both_sides_per_texel():
+    reference = torch.full((SIZE, SIZE, 3), 0.5)
+    one_side = reference.clone()
+    one_side[2:6, 1:3] *= 0.6
+    both = one_side.clone()
+    both[2:6, SIZE - 3:SIZE - 1] *= 0.6
+    weights = MapWeights(symmetry=300, reference=100, chromaticity=100, smoothness=0.001)
+    per_patch_one = float(map_regulariser(one_side, reference, ONES, weights))
+    per_patch_both = float(map_regulariser(both, reference, ONES, weights)) / 2
+    assert per_patch_one > 2 * per_patch_both
+
+
+def test_all_maps_are_summed_and_gradients_reach_each_map():
+    gen = torch.Generator().manual_seed(1)
+    maps = [torch.rand(SIZE, SIZE, c, generator=gen, requires_grad=True) for c in (3, 3, 1)]
+    initial = Textures(torch.full((SIZE, SIZE, 3), 0.5), torch.full((SIZE, SIZE, 3), 0.2),
+                       torch.full((SIZE, SIZE, 1), 0.4))
+    texture_regularisers(Textures(*maps), initial, ONES).backward()
+    assert all(m.grad is not None and m.grad.abs().sum() > 0 for m in maps)
