@@ -1,5 +1,6 @@
 """Fused numba kernels for the renderer's hot loops: barycentrics, corner interpolation (plain and
-band-filtered), bilinear texture lookup, per-pixel radiance, SH basis rows; each with its backward.
+band-filtered), bilinear texture lookup, SH basis rows and band sums, and the fused pixel shading
+(``shade_forward``); each with its backward.
 
 Each kernel has a torch reference path next to its caller (renderer.py, mesh.py, sh.py); these are the
 fast CPU path, used for CPU tensors when numba is importable and ``DEFACE_RENDER_KERNELS`` is not
@@ -51,6 +52,21 @@ def backend(name: str):
 
 def _array(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().contiguous().numpy()
+
+
+_workspaces: dict[str, np.ndarray] = {}
+
+
+def _workspace(name: str, shape: tuple, dtype) -> np.ndarray:
+    """A scratch array reused across calls (fresh large buffers cost more in page faults than in use).
+
+    Only for buffers that are consumed inside one kernel call and never returned.
+    """
+    size = int(np.prod(shape))
+    buffer = _workspaces.get(name)
+    if buffer is None or buffer.dtype != dtype or buffer.size < size:
+        buffer = _workspaces[name] = np.empty(size, dtype=dtype)
+    return buffer[:size].reshape(shape)
 
 
 def _pick(kernel):
@@ -135,23 +151,6 @@ def barycentrics_backward(corners_px, depth, centres, grad) -> tuple[torch.Tenso
     return torch.from_numpy(grad_p), torch.from_numpy(grad_z)
 
 
-# -- radiance of the covered pixels -----------------------------------------------------------------
-def radiance_forward(irradiance, diffuse, lit, visibility, specular) -> torch.Tensor:
-    """irradiance [N, K*3] * diffuse [N, 3] / pi + lit [N, K*3] * visibility [N, 1] * specular [N, 3]."""
-    out = np.empty(tuple(irradiance.shape), dtype=_array(irradiance).dtype)
-    arrays = [_array(t) for t in (irradiance, diffuse, lit, visibility, specular)]
-    _pick(_radiance_forward)(*arrays, out)
-    return torch.from_numpy(out)
-
-
-def radiance_backward(irradiance, diffuse, lit, visibility, specular, grad) -> list[torch.Tensor]:
-    """Gradients of ``radiance_forward`` to its five inputs (same shapes)."""
-    arrays = [_array(t) for t in (irradiance, diffuse, lit, visibility, specular)]
-    grads = [np.empty(a.shape, dtype=a.dtype) for a in arrays]
-    _pick(_radiance_backward)(*arrays, _array(grad), *grads)
-    return [torch.from_numpy(g) for g in grads]
-
-
 # -- SH band sums ---------------------------------------------------------------------------------
 _SH_CHUNK = 256  # directions per parallel block (each block allocates its own work arrays once)
 
@@ -179,6 +178,95 @@ def sh_basis_backward(directions: torch.Tensor, grad: torch.Tensor, constants) -
     out = np.empty(dirs.shape, dtype=dirs.dtype)
     _pick(_sh_basis_vjp)(dirs, constants, _array(grad), _SH_CHUNK, out)
     return torch.from_numpy(out)
+
+
+def sh_band_sums_forward(directions: torch.Tensor, coeffs: torch.Tensor, constants) -> torch.Tensor:
+    """Per-band sums S_l(w) = sum_m c_lm Y_lm(w): directions [N, 3], coeffs [B², C] -> [N, B, C]."""
+    dirs = _array(directions)
+    out = np.empty((dirs.shape[0], constants[0].shape[0], coeffs.shape[1]), dtype=dirs.dtype)
+    _pick(_sh_band_sums)(dirs, _array(coeffs).astype(np.float64), constants, _SH_CHUNK, out)
+    return torch.from_numpy(out)
+
+
+def sh_band_sums_backward(directions, coeffs, grad, constants, need_directions: bool, need_coeffs: bool):
+    """Gradients of ``sh_band_sums_forward`` to directions [N, 3] and coeffs [B², C] (None where not needed).
+
+    The coefficient gradient (a sum over N) is summed per block of _SH_CHUNK directions, then over the
+    blocks in order: the same result for any number of threads.
+    """
+    dirs, c = _array(directions), _array(coeffs).astype(np.float64)
+    blocks = (dirs.shape[0] + _SH_CHUNK - 1) // _SH_CHUNK
+    grad_dirs = np.empty(dirs.shape, dtype=dirs.dtype)
+    partial = np.empty((blocks if need_coeffs else 0, c.shape[0], c.shape[1]), dtype=np.float64)
+    _pick(_sh_band_sums_vjp)(dirs, c, _array(grad), constants, _SH_CHUNK, need_directions, grad_dirs, partial)
+    return (
+        torch.from_numpy(grad_dirs) if need_directions else None,
+        torch.from_numpy(partial.sum(0).astype(dirs.dtype)) if need_coeffs else None,
+    )
+
+
+# -- fused pixel shading ----------------------------------------------------------------------------
+SCREEN_CHANNELS = (2, 3, 1, 3, 3, 1)
+"""Channels of the screen buffers ``shade_forward`` writes besides the images: uv, normals, depth,
+diffuse, specular, roughness."""
+
+
+def shade_forward(plain, bands_v, uvs, bary, textures, pixels, size):
+    """Every screen buffer of the covered pixels in one pass (renderer._KernelShade has the formulas).
+
+    plain [U, 3K+5] per-vertex (irradiance, normal, camera z, visibility), bands_v [U, B, 3K] specular
+    band sums, uvs [Nuv, 2], bary [N, 3], textures (diffuse, specular, roughness) [Ht, Wt, C],
+    pixels = (flat pixel index [N], vertex corners [N, 3], uv corners [N, 3]), size = (H, W).
+    Returns images [K, H, W, 3] and the six screen buffers [H, W, C] of SCREEN_CHANNELS (0 elsewhere).
+    """
+    arrays = [_array(t) for t in (plain, bands_v, uvs, bary, *textures)]
+    covered, corners, uv_corners = (_array(t) for t in pixels)
+    dtype = arrays[0].dtype
+    height, width = size
+    images = np.zeros((bands_v.shape[2] // 3, height, width, 3), dtype=dtype)
+    screens = [np.zeros((height, width, c), dtype=dtype) for c in SCREEN_CHANNELS]
+    _pick(_shade_forward)(*arrays, covered, corners, uv_corners, images, *screens)
+    screens[2] = screens[2][..., 0]  # depth is [H, W]
+    return [torch.from_numpy(a) for a in (images, *screens)]
+
+
+def shade_backward(plain, bands_v, uvs, bary, textures, pixels, width, grads, need_textures):
+    """Gradients of ``shade_forward`` from the output gradients ``grads`` (None where unused).
+
+    Returns (grad plain [U, P], grad bands_v [U, B, 3K], grad bary [N, 3], texture grads (None where
+    ``need_textures`` is False)).
+    """
+    arrays = [_array(t) for t in (plain, bands_v, uvs, bary, *textures)]
+    covered, corners, uv_corners = (_array(t) for t in pixels)
+    dtype = arrays[0].dtype
+    num, bands, channels = bary.shape[0], bands_v.shape[1], bands_v.shape[2]
+    given = np.array([g is not None for g in grads])
+    outputs = [
+        _array(g) if g is not None else np.zeros((1,) * ndim, dtype=dtype)
+        for g, ndim in zip(grads, (4, 3, 3, 2, 3, 3, 3), strict=True)
+    ]
+    grad_plain = np.empty((num, plain.shape[1]), dtype=dtype)
+    grad_summed = _workspace("shade_grad_summed", (num, bands * channels), dtype)  # [N, B*3K], lobe_l g_lit
+    grad_texels = np.empty((num, 7), dtype=dtype)  # d loss / d (diffuse, specular, roughness) samples
+    grad_bary = np.empty((num, 3), dtype=dtype)
+    _pick(_shade_backward)(
+        *arrays, covered, corners, uv_corners, width, given, *outputs, grad_plain, grad_summed, grad_texels, grad_bary
+    )
+    offsets, entries = _corners_by_vertex(corners, plain.shape[0])
+    grad_vertex = np.empty((plain.shape[0], plain.shape[1]), dtype=dtype)
+    _pick(_gather_rows)(offsets, entries, arrays[3], grad_plain, grad_vertex)
+    grad_bands = np.empty((plain.shape[0], bands * channels), dtype=dtype)
+    _pick(_gather_rows)(offsets, entries, arrays[3], grad_summed, grad_bands)
+    uv = _shade_uv(arrays[2], arrays[3], uv_corners) if any(need_textures) else None
+    texture_grads = []
+    for texture, start, need in zip(arrays[4:], (0, 3, 6), need_textures, strict=True):
+        grad_texture = None
+        if need:
+            grad_texture = np.zeros(texture.shape, dtype=dtype)
+            _bilinear_scatter(uv, grad_texels[:, start : start + texture.shape[2]], grad_texture)
+        texture_grads.append(None if grad_texture is None else torch.from_numpy(grad_texture))
+    grad_bands = grad_bands.reshape(plain.shape[0], bands, channels)
+    return torch.from_numpy(grad_vertex), torch.from_numpy(grad_bands), torch.from_numpy(grad_bary), texture_grads
 
 
 if numba is not None:
@@ -372,29 +460,6 @@ if numba is not None:
                 grad_p[n, k, 0] -= g * d[j, 1]
                 grad_p[n, k, 1] += g * d[j, 0]
 
-    @_serial_and_parallel
-    def _radiance_forward(irradiance, diffuse, lit, visibility, specular, out):
-        for p in prange(out.shape[0]):
-            for j in range(out.shape[1]):
-                c = j % 3
-                out[p, j] = irradiance[p, j] * (diffuse[p, c] / np.pi) + lit[p, j] * visibility[p, 0] * specular[p, c]
-
-    @_serial_and_parallel
-    def _radiance_backward(irradiance, diffuse, lit, visibility, specular, grad, g_irr, g_diff, g_lit, g_vis, g_spec):
-        for p in prange(grad.shape[0]):
-            g_vis[p, 0] = 0.0
-            for c in range(3):
-                g_diff[p, c] = 0.0
-                g_spec[p, c] = 0.0
-            for j in range(grad.shape[1]):
-                c = j % 3
-                g = grad[p, j]
-                g_irr[p, j] = g * (diffuse[p, c] / np.pi)
-                g_diff[p, c] += g * irradiance[p, j] / np.pi
-                g_lit[p, j] = g * visibility[p, 0] * specular[p, c]
-                g_vis[p, 0] += g * lit[p, j] * specular[p, c]
-                g_spec[p, c] += g * lit[p, j] * visibility[p, 0]
-
     @njit(inline="always")
     def _sh_rows_at(direction, constants, scratch, basis, d_basis, derivative):
         """Y_j (index l*l+l+m) at one unit direction [3] into ``basis`` [B²], and dY_j/d(x, y, z) into
@@ -463,3 +528,330 @@ if numba is not None:
                     gy += grad[n, j] * d_basis[j, 1]
                     gz += grad[n, j] * d_basis[j, 2]
                 out[n, 0], out[n, 1], out[n, 2] = gx, gy, gz
+
+    @njit(inline="always")
+    def _sh_block_rows(directions, constants, start, size, rows, d_rows, derivative):
+        """Basis of directions[start : start + size] as columns of ``rows`` [B², chunk] (and the
+        derivatives into ``d_rows`` [3, B², chunk]): later loops then run along the block, vectorised."""
+        bands = constants[0].shape[0]
+        scratch, basis, d_basis = _sh_scratch(bands), np.empty(bands * bands), np.empty((bands * bands, 3))
+        for k in range(size):
+            _sh_rows_at(directions[start + k], constants, scratch, basis, d_basis, derivative)
+            for j in range(bands * bands):
+                rows[j, k] = basis[j]
+                if derivative:
+                    d_rows[0, j, k], d_rows[1, j, k], d_rows[2, j, k] = d_basis[j, 0], d_basis[j, 1], d_basis[j, 2]
+
+    @_serial_and_parallel
+    def _sh_band_sums(directions, coeffs, constants, chunk, out):
+        bands = constants[0].shape[0]
+        count, channels = directions.shape[0], coeffs.shape[1]
+        for block in prange((count + chunk - 1) // chunk):
+            start = block * chunk
+            size = min(count, start + chunk) - start
+            rows, sums = np.empty((bands * bands, chunk)), np.empty((channels, chunk))
+            _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
+            for l in range(bands):  # noqa: E741
+                sums[:] = 0.0
+                for j in range(l * l, (l + 1) * (l + 1)):
+                    for c in range(channels):
+                        weight = coeffs[j, c]
+                        for k in range(size):
+                            sums[c, k] += weight * rows[j, k]
+                for k in range(size):
+                    for c in range(channels):
+                        out[start + k, l, c] = sums[c, k]
+
+    @_serial_and_parallel
+    def _sh_band_sums_vjp(directions, coeffs, grad, constants, chunk, need_directions, grad_dirs, partial):
+        bands = constants[0].shape[0]
+        count, channels = directions.shape[0], coeffs.shape[1]
+        need_coeffs = partial.shape[0] > 0
+        for block in prange((count + chunk - 1) // chunk):
+            start = block * chunk
+            size = min(count, start + chunk) - start
+            rows, d_rows = np.empty((bands * bands, chunk)), np.empty((3, bands * bands, chunk))
+            _sh_block_rows(directions, constants, start, size, rows, d_rows, need_directions)
+            grad_rows, grad_block = np.zeros((3, chunk)), np.empty((channels, chunk))
+            g_basis = np.empty(chunk)
+            for l in range(bands):  # noqa: E741
+                for k in range(size):
+                    for c in range(channels):
+                        grad_block[c, k] = grad[start + k, l, c]
+                for j in range(l * l, (l + 1) * (l + 1)):
+                    if need_coeffs:  # this block's share of the coefficient gradient
+                        for c in range(channels):
+                            total = 0.0
+                            for k in range(size):
+                                total += rows[j, k] * grad_block[c, k]
+                            partial[block, j, c] = total
+                    if need_directions:
+                        g_basis[:] = 0.0  # d loss / d Y_j = sum_c grad[n, l, c] coeffs[j, c]
+                        for c in range(channels):
+                            weight = coeffs[j, c]
+                            for k in range(size):
+                                g_basis[k] += weight * grad_block[c, k]
+                        for axis in range(3):
+                            for k in range(size):
+                                grad_rows[axis, k] += g_basis[k] * d_rows[axis, j, k]
+            if need_directions:
+                for k in range(size):
+                    for axis in range(3):
+                        grad_dirs[start + k, axis] = grad_rows[axis, k]
+
+    @njit(inline="always")
+    def _bilinear_setup(uv0, uv1, height, width):
+        """Texels, fractions and slopes of a bilinear lookup at (u, v) (sample_texture's convention)."""
+        x0, fx, slope_x = _texel_axis(uv0, width)
+        y0, fy, slope_y = _texel_axis(1.0 - uv1, height)
+        return x0, min(x0 + 1, width - 1), fx, slope_x, y0, min(y0 + 1, height - 1), fy, slope_y
+
+    @njit(inline="always")
+    def _bilinear_sample(texture, x0, x1, fx, y0, y1, fy, c):
+        top = texture[y0, x0, c] * (1.0 - fx) + texture[y0, x1, c] * fx
+        bottom = texture[y1, x0, c] * (1.0 - fx) + texture[y1, x1, c] * fx
+        return top * (1.0 - fy) + bottom * fy
+
+    @njit(cache=True)
+    def _shade_uv(uvs, bary, uv_corners):
+        """Interpolated uv [N, 2] of the covered pixels."""
+        out = np.empty((bary.shape[0], 2), dtype=bary.dtype)
+        for p in range(bary.shape[0]):
+            for a in range(2):
+                out[p, a] = (
+                    bary[p, 0] * uvs[uv_corners[p, 0], a]
+                    + bary[p, 1] * uvs[uv_corners[p, 1], a]
+                    + bary[p, 2] * uvs[uv_corners[p, 2], a]
+                )
+        return out
+
+    @njit(inline="always")
+    def _phong_lobe(roughness, lobe):
+        """sh.phong_lobe_filter into ``lobe`` [B]; returns the exponent s and d s / d roughness."""
+        alpha, d_alpha = roughness, 1.0
+        if roughness < 1e-3:
+            alpha, d_alpha = 1e-3, 0.0
+        elif roughness > 1.0:
+            alpha, d_alpha = 1.0, 0.0
+        exponent = 2.0 / (alpha * alpha) - 2.0
+        d_exponent = -4.0 / (alpha * alpha * alpha) * d_alpha
+        if exponent < 1e-4:
+            exponent, d_exponent = 1e-4, 0.0
+        # lobe_l = q^(l²) with q = exp(-1 / (2 s)): one exp per pixel, then q^(2l - 1) step by step
+        q = np.exp(-1.0 / (2.0 * exponent))
+        lobe[0], step = 1.0, q
+        for l in range(1, lobe.shape[0]):  # noqa: E741
+            lobe[l] = lobe[l - 1] * step
+            step *= q * q
+        return exponent, d_exponent
+
+    @njit(inline="always")
+    def _filter_bands(summed, lobe, lit):
+        """lit [C] = sum_l lobe[l] summed[l*C : (l+1)*C] (band-major rows, vectorised along C)."""
+        channels = lit.shape[0]
+        lit[:] = 0.0
+        for l in range(lobe.shape[0]):  # noqa: E741
+            weight = lobe[l]
+            for j in range(channels):
+                lit[j] += weight * summed[l * channels + j]
+
+    @njit(inline="always")
+    def _interpolate_row(values, corners, bary, p, out):
+        """out [C] = sum_i bary[p, i] values[corners[p, i]] for values [U, C] (contiguous, vectorised)."""
+        v0, v1, v2 = corners[p, 0], corners[p, 1], corners[p, 2]
+        b0, b1, b2 = bary[p, 0], bary[p, 1], bary[p, 2]
+        for c in range(out.shape[0]):
+            out[c] = b0 * values[v0, c] + b1 * values[v1, c] + b2 * values[v2, c]
+
+    @_serial_and_parallel
+    def _shade_forward(
+        plain,
+        bands_v,
+        uvs,
+        bary,
+        diffuse_map,
+        specular_map,
+        roughness_map,
+        covered,
+        corners,
+        uv_corners,
+        images,
+        uv_out,
+        normal_out,
+        depth_out,
+        diffuse_out,
+        specular_out,
+        roughness_out,
+    ):
+        num_channels, bands = bands_v.shape[2], bands_v.shape[1]
+        lights = num_channels // 3
+        width = images.shape[2]
+        tex_h, tex_w = diffuse_map.shape[0], diffuse_map.shape[1]
+        flat_bands = bands_v.reshape(bands_v.shape[0], bands * num_channels)
+        for block in prange((bary.shape[0] + 255) // 256):
+            values, summed = np.empty(plain.shape[1], dtype=plain.dtype), np.empty(bands * num_channels)
+            lobe, lit = np.empty(bands), np.empty(num_channels)
+            for p in range(block * 256, min(bary.shape[0], (block + 1) * 256)):
+                y, x = covered[p] // width, covered[p] % width
+                _interpolate_row(plain, corners, bary, p, values)
+                _interpolate_row(flat_bands, corners, bary, p, summed)
+                u = (
+                    bary[p, 0] * uvs[uv_corners[p, 0], 0]
+                    + bary[p, 1] * uvs[uv_corners[p, 1], 0]
+                    + bary[p, 2] * uvs[uv_corners[p, 2], 0]
+                )
+                v = (
+                    bary[p, 0] * uvs[uv_corners[p, 0], 1]
+                    + bary[p, 1] * uvs[uv_corners[p, 1], 1]
+                    + bary[p, 2] * uvs[uv_corners[p, 2], 1]
+                )
+                x0, x1, fx, _, y0, y1, fy, _ = _bilinear_setup(u, v, tex_h, tex_w)
+                roughness = _bilinear_sample(roughness_map, x0, x1, fx, y0, y1, fy, 0)
+                _phong_lobe(roughness, lobe)
+                visibility = values[num_channels + 4]
+                _filter_bands(summed, lobe, lit)
+                for c in range(3):
+                    d = _bilinear_sample(diffuse_map, x0, x1, fx, y0, y1, fy, c)
+                    s = _bilinear_sample(specular_map, x0, x1, fx, y0, y1, fy, c)
+                    diffuse_out[y, x, c], specular_out[y, x, c] = d, s
+                    for k in range(lights):
+                        j = 3 * k + c
+                        images[k, y, x, c] = values[j] * (d / np.pi) + lit[j] * visibility * s
+                norm = np.sqrt(
+                    values[num_channels] ** 2 + values[num_channels + 1] ** 2 + values[num_channels + 2] ** 2
+                )
+                norm = max(norm, 1e-12)
+                for a in range(3):
+                    normal_out[y, x, a] = values[num_channels + a] / norm
+                uv_out[y, x, 0], uv_out[y, x, 1] = u, v
+                depth_out[y, x, 0] = values[num_channels + 3]
+                roughness_out[y, x, 0] = roughness
+
+    @_serial_and_parallel
+    def _shade_backward(
+        plain,
+        bands_v,
+        uvs,
+        bary,
+        diffuse_map,
+        specular_map,
+        roughness_map,
+        covered,
+        corners,
+        uv_corners,
+        width,
+        given,
+        g_images,
+        g_uv,
+        g_normal,
+        g_depth,
+        g_diffuse,
+        g_specular,
+        g_roughness,
+        grad_plain,
+        grad_summed,
+        grad_texels,
+        grad_bary,
+    ):
+        num_channels, bands = bands_v.shape[2], bands_v.shape[1]
+        lights = num_channels // 3
+        tex_h, tex_w = diffuse_map.shape[0], diffuse_map.shape[1]
+        flat_bands = bands_v.reshape(bands_v.shape[0], bands * num_channels)
+        for block in prange((bary.shape[0] + 255) // 256):
+            values, summed = np.empty(plain.shape[1], dtype=plain.dtype), np.empty(bands * num_channels)
+            lobe, lit, g_lit = np.empty(bands), np.empty(num_channels), np.empty(num_channels)
+            for p in range(block * 256, min(bary.shape[0], (block + 1) * 256)):
+                y, x = covered[p] // width, covered[p] % width
+                _interpolate_row(plain, corners, bary, p, values)
+                _interpolate_row(flat_bands, corners, bary, p, summed)
+                u = (
+                    bary[p, 0] * uvs[uv_corners[p, 0], 0]
+                    + bary[p, 1] * uvs[uv_corners[p, 1], 0]
+                    + bary[p, 2] * uvs[uv_corners[p, 2], 0]
+                )
+                v = (
+                    bary[p, 0] * uvs[uv_corners[p, 0], 1]
+                    + bary[p, 1] * uvs[uv_corners[p, 1], 1]
+                    + bary[p, 2] * uvs[uv_corners[p, 2], 1]
+                )
+                x0, x1, fx, slope_x, y0, y1, fy, slope_y = _bilinear_setup(u, v, tex_h, tex_w)
+                roughness = _bilinear_sample(roughness_map, x0, x1, fx, y0, y1, fy, 0)
+                exponent, d_exponent = _phong_lobe(roughness, lobe)
+                _filter_bands(summed, lobe, lit)
+                visibility = values[num_channels + 4]
+                g_visibility = 0.0
+                d_fx, d_fy = 0.0, 0.0  # d loss / d bilinear fractions, summed over the three maps
+                for c in range(3):
+                    d = _bilinear_sample(diffuse_map, x0, x1, fx, y0, y1, fy, c)
+                    s = _bilinear_sample(specular_map, x0, x1, fx, y0, y1, fy, c)
+                    g_d = g_diffuse[y, x, c] if given[4] else 0.0
+                    g_s = g_specular[y, x, c] if given[5] else 0.0
+                    for k in range(lights):
+                        j = 3 * k + c
+                        g = g_images[k, y, x, c] if given[0] else 0.0
+                        grad_plain[p, j] = g * d / np.pi
+                        g_d += g * values[j] / np.pi
+                        g_lit[j] = g * visibility * s
+                        g_visibility += g * lit[j] * s
+                        g_s += g * lit[j] * visibility
+                    grad_texels[p, c], grad_texels[p, 3 + c] = g_d, g_s
+                    t00, t01, t10, t11 = _texel_corners(diffuse_map, x0, x1, y0, y1, c)
+                    d_fx += g_d * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
+                    d_fy += g_d * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
+                    t00, t01, t10, t11 = _texel_corners(specular_map, x0, x1, y0, y1, c)
+                    d_fx += g_s * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
+                    d_fy += g_s * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
+                # lobe_l = exp(-l² / (2 s)): d lobe_l / d s = lobe_l l² / (2 s²)
+                g_exponent = 0.0
+                for l in range(bands):  # noqa: E741
+                    g_lobe = 0.0
+                    for j in range(num_channels):
+                        g_lobe += g_lit[j] * summed[l * num_channels + j]
+                        grad_summed[p, l * num_channels + j] = lobe[l] * g_lit[j]
+                    g_exponent += g_lobe * lobe[l] * (l * l) / (2.0 * exponent * exponent)
+                g_r = g_exponent * d_exponent + (g_roughness[y, x, 0] if given[6] else 0.0)
+                grad_texels[p, 6] = g_r
+                t00, t01, t10, t11 = _texel_corners(roughness_map, x0, x1, y0, y1, 0)
+                d_fx += g_r * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
+                d_fy += g_r * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
+                g_u = d_fx * slope_x + (g_uv[y, x, 0] if given[1] else 0.0)
+                g_v = -d_fy * slope_y + (g_uv[y, x, 1] if given[1] else 0.0)
+                # normals: n / max(|n|, 1e-12)
+                norm = np.sqrt(
+                    values[num_channels] ** 2 + values[num_channels + 1] ** 2 + values[num_channels + 2] ** 2
+                )
+                clamped = max(norm, 1e-12)
+                dot = 0.0
+                for a in range(3):
+                    g_n = g_normal[y, x, a] if given[2] else 0.0
+                    grad_plain[p, num_channels + a] = g_n / clamped
+                    dot += g_n * values[num_channels + a]
+                if norm >= 1e-12:
+                    for a in range(3):
+                        grad_plain[p, num_channels + a] -= dot / (clamped * clamped) * values[num_channels + a] / norm
+                grad_plain[p, num_channels + 3] = g_depth[y, x] if given[3] else 0.0
+                grad_plain[p, num_channels + 4] = g_visibility
+                for i in range(3):
+                    total = g_u * uvs[uv_corners[p, i], 0] + g_v * uvs[uv_corners[p, i], 1]
+                    vertex = corners[p, i]
+                    for c in range(plain.shape[1]):
+                        total += plain[vertex, c] * grad_plain[p, c]
+                    for j in range(bands * num_channels):
+                        total += flat_bands[vertex, j] * grad_summed[p, j]
+                    grad_bary[p, i] = total
+
+    @njit(inline="always")
+    def _texel_corners(texture, x0, x1, y0, y1, c):
+        return texture[y0, x0, c], texture[y0, x1, c], texture[y1, x0, c], texture[y1, x1, c]
+
+    @_serial_and_parallel
+    def _gather_rows(offsets, slots, bary, grad, out):
+        """out[v] = sum over the corner slots of v of bary[p, i] grad[p] (rows [N, C] -> [U, C])."""
+        for v in prange(out.shape[0]):
+            for c in range(out.shape[1]):
+                out[v, c] = 0.0
+            for k in range(offsets[v], offsets[v + 1]):
+                p, i = slots[k] // 3, slots[k] % 3
+                weight = bary[p, i]
+                for c in range(out.shape[1]):
+                    out[v, c] += weight * grad[p, c]

@@ -26,7 +26,7 @@ from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures, sample_textures
 from deface.render.raycast import RayScene
-from deface.render.sh import cosine_lobe_band, phong_lobe_filter, sh_band_sums
+from deface.render.sh import cosine_lobe_coefficients, phong_lobe_filter, sh_band_sums, sh_basis_rows
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 
@@ -93,8 +93,13 @@ class Renderer:
         verts = mesh.vertices.detach().cpu().numpy().astype(np.float32)
         tris = mesh.triangles.cpu().numpy()
         key = self._scene_key
-        if key is None or key[0].shape != verts.shape or key[1].shape != tris.shape \
-                or not np.array_equal(key[0], verts) or not np.array_equal(key[1], tris):
+        if (
+            key is None
+            or key[0].shape != verts.shape
+            or key[1].shape != tris.shape
+            or not np.array_equal(key[0], verts)
+            or not np.array_equal(key[1], tris)
+        ):
             self._scene = RayScene(verts, tris)
             self._scene_key = (verts, tris)
         return self._scene
@@ -113,9 +118,7 @@ class Renderer:
         """
         height, width = camera.height, camera.width
         if tuple(triangle_id.shape) != (height, width):
-            raise ValueError(
-                f"fragments_for: triangle_id must be [{height}, {width}], got {tuple(triangle_id.shape)}"
-            )
+            raise ValueError(f"fragments_for: triangle_id must be [{height}, {width}], got {tuple(triangle_id.shape)}")
         device, dtype = mesh.vertices.device, mesh.vertices.dtype
         tid = triangle_id.to(device=device, dtype=torch.long)
         flat = tid.reshape(-1)
@@ -155,8 +158,14 @@ class Renderer:
         """One refresh of the occluded SH transfer (V x shadow_rays Embree rays; see shadow.py)."""
         cfg = self.config
         return compute_shadow_transfer(
-            mesh.vertices, mesh.triangles, mesh.vertex_normals(), cfg.bands, cfg.shadow_rays,
-            seed=cfg.seed, offset=cfg.shadow_ray_offset, scene=self.ray_scene(mesh),
+            mesh.vertices,
+            mesh.triangles,
+            mesh.vertex_normals(),
+            cfg.bands,
+            cfg.shadow_rays,
+            seed=cfg.seed,
+            offset=cfg.shadow_ray_offset,
+            scene=self.ray_scene(mesh),
         )
 
     # -- shading ----------------------------------------------------------------------------------
@@ -183,8 +192,31 @@ class Renderer:
         normals_v = mesh.vertex_normals().index_select(0, used).to(dtype)  # [U, 3]
         irradiance_v = _vertex_irradiance(normals_v, coeffs, bands, transfer, used)  # [U, K*3]
 
-        # One gather for every per-vertex quantity (index_select's backward is a fast index_add).
+        uv_corners = mesh.triangle_uvs[fragments.triangle_id.reshape(-1)[covered]]  # [N, 3]
         camera_z = camera.to_camera(mesh.vertices.index_select(0, used))[:, 2:]  # [U, 1]
+        if self._fused(sh_lights, textures, mesh, bary):
+            positions = mesh.vertices.index_select(0, used).to(dtype)  # [U, 3]
+            bands_v = _specular_bands(positions, normals_v, camera, coeffs, bands)  # [U, B*K*3]
+            visibility = (
+                transfer.visibility.to(dtype).index_select(0, used)[:, None]
+                if transfer is not None
+                else normals_v.new_ones(normals_v.shape[0], 1)
+            )
+            plain = torch.cat([irradiance_v, normals_v, camera_z.to(dtype), visibility], 1)  # [U, K*3 + 5]
+            images, *buffers = _KernelShade.apply(
+                plain,
+                bands_v.reshape(-1, bands, num_lights * 3),
+                mesh.uvs.to(dtype),
+                bary,
+                textures.diffuse,
+                textures.specular,
+                textures.roughness,
+                (covered, local, uv_corners),
+                (height, width),
+            )
+            return RenderOutput(images, fragments.mask, *buffers[:3], fragments.triangle_id, *buffers[3:])
+
+        # One gather for every per-vertex quantity (index_select's backward is a fast index_add).
         per_vertex = [irradiance_v, normals_v, camera_z.to(dtype)]
         if self.config.specular:
             positions = mesh.vertices.index_select(0, used).to(dtype)  # [U, 3]
@@ -196,7 +228,6 @@ class Renderer:
         irradiance, normals, depth = pixel_values[:3]  # [N, K*3], [N, 3], [N, 1]
         normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
 
-        uv_corners = mesh.triangle_uvs[fragments.triangle_id.reshape(-1)[covered]]  # [N, 3]
         uv = _interpolate(mesh.uvs.to(dtype), uv_corners, bary)  # [N, 2]
         diffuse, specular, roughness = sample_textures([textures.diffuse, textures.specular, textures.roughness], uv)
 
@@ -225,6 +256,16 @@ class Renderer:
             roughness=screen(roughness),
         )
 
+    def _fused(self, sh_lights, textures: Textures, mesh: Mesh, bary: torch.Tensor) -> bool:
+        """Whether ``shade`` runs the fused numba pixel kernel (specular on, one dtype, fixed uvs)."""
+        maps = (textures.diffuse, textures.specular, textures.roughness)
+        return (
+            self.config.specular
+            and not mesh.uvs.requires_grad
+            and kernels.enabled(sh_lights, bary, *maps)
+            and len({t.dtype for t in (sh_lights, bary, *maps)}) == 1
+        )
+
     def render(
         self,
         mesh: Mesh,
@@ -242,9 +283,7 @@ class Renderer:
         return self.shade(mesh, camera, self.rasterize(mesh, camera), textures, sh_lights, transfer)
 
 
-def vertex_irradiance(
-    mesh: Mesh, sh_lights: torch.Tensor, transfer: ShadowTransfer | None = None
-) -> torch.Tensor:
+def vertex_irradiance(mesh: Mesh, sh_lights: torch.Tensor, transfer: ShadowTransfer | None = None) -> torch.Tensor:
     """Per-vertex SH irradiance [V, K, 3]: analytic unshadowed term minus the occluded transfer (if given).
 
     E_v = sum_lm A_l c_lm Y_lm(n_v) - sum_lm c_lm O_v[lm]; Lambertian radiance is albedo / pi * E.
@@ -257,15 +296,19 @@ def vertex_irradiance(
 
 
 def _vertex_irradiance(
-    normals: torch.Tensor, coeffs: torch.Tensor, bands: int, transfer: ShadowTransfer | None,
+    normals: torch.Tensor,
+    coeffs: torch.Tensor,
+    bands: int,
+    transfer: ShadowTransfer | None,
     subset: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """normals [U, 3], coeffs [B², K*3] -> irradiance [U, K*3].
 
     ``subset`` [U] (long) are the mesh vertices the normals belong to (None: all V vertices, U = V).
     """
-    lobe = torch.tensor([cosine_lobe_band(l) for l in range(bands)], dtype=coeffs.dtype, device=coeffs.device)
-    irradiance = (sh_band_sums(normals, coeffs) * lobe[:, None]).sum(1)  # [V, K*3] unshadowed, sum_l A_l S_l
+    lobe = cosine_lobe_coefficients(bands).to(coeffs)  # [B²]
+    # unshadowed sum_lm A_l c_lm Y_lm(n): one product with the filtered coefficients, no per-band sums
+    irradiance = sh_basis_rows(normals, bands).T @ (lobe[:, None] * coeffs)  # [V, K*3]
     if transfer is not None:
         occluded = transfer.occluded
         num_vertices = normals.shape[0] if subset is None else None
@@ -338,25 +381,36 @@ def _specular_bands(
 def _radiance(irradiance, diffuse, lit, visibility, specular) -> torch.Tensor:
     """Diffuse plus shadowed specular radiance of the covered pixels, [N, K*3]:
     irradiance [N, K*3] * diffuse [N, 3] / pi + lit [N, K*3] * visibility [N, 1] * specular [N, 3]."""
-    inputs = (irradiance, diffuse, lit, visibility, specular)
-    if kernels.enabled(*inputs) and len({t.dtype for t in inputs}) == 1:
-        return _KernelRadiance.apply(*inputs)
     num = irradiance.shape[0]
     diffuse_part = irradiance.reshape(num, -1, 3) * (diffuse / math.pi)[:, None]
     return (diffuse_part + (lit * visibility).reshape(num, -1, 3) * specular[:, None]).reshape(num, -1)
 
 
-class _KernelRadiance(torch.autograd.Function):
-    """The numba path of ``_radiance``: one pass per pixel instead of broadcasts and [N, K, 3] reductions."""
+class _KernelShade(torch.autograd.Function):
+    """The numba path of ``Renderer.shade``'s pixel stage, fused: per covered pixel it interpolates the
+    per-vertex values, looks up the three maps, applies the Phong filter and writes every screen buffer;
+    the backward is one pass over the pixels plus the per-vertex gathers (kernels.shade_backward).
+
+    Inputs: plain [U, K*3 + 5] (irradiance, normal, camera z, visibility per used vertex), bands_v
+    [U, B, K*3], uvs [Nuv, 2], bary [N, 3], the diffuse / specular / roughness maps; pixels = (covered
+    [N], corners [N, 3] into U, uv corners [N, 3]); size = (H, W). The formulas are those of the torch
+    path of ``shade`` (the reference, compared in tests/test_render_kernels.py).
+    """
 
     @staticmethod
-    def forward(ctx, *inputs):
-        ctx.save_for_backward(*inputs)
-        return kernels.radiance_forward(*inputs)
+    def forward(ctx, plain, bands_v, uvs, bary, diffuse, specular, roughness, pixels, size):
+        ctx.set_materialize_grads(False)
+        ctx.save_for_backward(plain, bands_v, uvs, bary, diffuse, specular, roughness)
+        ctx.pixels, ctx.width = pixels, size[1]
+        return tuple(kernels.shade_forward(plain, bands_v, uvs, bary, (diffuse, specular, roughness), pixels, size))
 
     @staticmethod
-    def backward(ctx, grad):
-        return tuple(kernels.radiance_backward(*ctx.saved_tensors, grad))
+    def backward(ctx, *grads):
+        plain, bands_v, uvs, bary, *maps = ctx.saved_tensors
+        grad_plain, grad_bands, grad_bary, grad_maps = kernels.shade_backward(
+            plain, bands_v, uvs, bary, maps, ctx.pixels, ctx.width, grads, ctx.needs_input_grad[4:7]
+        )
+        return grad_plain, grad_bands, None, grad_bary, *grad_maps, None, None
 
 
 def _filtered_interpolation(
@@ -417,9 +471,7 @@ class _FilteredInterpolation(torch.autograd.Function):
         grad = grad.contiguous()
         grad_values = grad_bary = grad_lobe = None
         if ctx.needs_input_grad[2] or ctx.needs_input_grad[3]:
-            pattern = _csr(
-                rows, columns, grad.new_zeros(columns.numel()), size=(num, values.shape[0] * bands)
-            )
+            pattern = _csr(rows, columns, grad.new_zeros(columns.numel()), size=(num, values.shape[0] * bands))
             flat = values.reshape(-1, grad.shape[1])
             # d out[p] / d weight[p, i, l] = S[corner_i, l]: (grad @ S^T) sampled at the sparsity pattern
             grad_weights = torch.sparse.sampled_addmm(pattern, grad, flat.T, beta=0.0).values()
@@ -433,9 +485,7 @@ class _FilteredInterpolation(torch.autograd.Function):
             order = torch.argsort(corner_flat, stable=True)
             counts = torch.bincount(corner_flat, minlength=values.shape[0])
             crow = torch.cat([counts.new_zeros(1), counts.cumsum(0)])
-            transpose = _csr(
-                crow, order // 3, bary.reshape(-1)[order], size=(values.shape[0], num)
-            )
+            transpose = _csr(crow, order // 3, bary.reshape(-1)[order], size=(values.shape[0], num))
             weighted = (lobe[:, :, None] * grad[:, None, :]).reshape(num, -1)  # [N, B*C]
             grad_values = transpose @ weighted
         return grad_values, None, grad_bary, grad_lobe

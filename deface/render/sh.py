@@ -173,10 +173,27 @@ def sh_band_sums(directions: torch.Tensor, coeffs: torch.Tensor) -> torch.Tensor
     bands = math.isqrt(coeffs.shape[0])
     if bands < 1 or bands * bands != coeffs.shape[0] or directions.ndim != 2 or directions.shape[1] != 3:
         raise ValueError(f"sh_band_sums: got directions {tuple(directions.shape)}, coeffs {tuple(coeffs.shape)}")
+    if kernels.enabled(directions, coeffs) and directions.dtype == coeffs.dtype:
+        return _SHBandSums.apply(directions, coeffs)
     sizes = [2 * l + 1 for l in range(bands)]
     # split, not slicing: the backward of a split is one cat, that of each slice a full-size zero buffer
     rows, blocks = sh_basis_rows(directions, bands).split(sizes), coeffs.split(sizes)  # [2l+1, N], [2l+1, C]
     return torch.stack([row.T @ block for row, block in zip(rows, blocks, strict=True)], 1)
+
+
+class _SHBandSums(torch.autograd.Function):
+    """The numba path of ``sh_band_sums``: basis and band sums per direction, no [B², N] rows, no matmuls."""
+
+    @staticmethod
+    def forward(ctx, directions: torch.Tensor, coeffs: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(directions, coeffs)
+        return kernels.sh_band_sums_forward(directions, coeffs, _kernel_constants(math.isqrt(coeffs.shape[0])))
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor):
+        directions, coeffs = ctx.saved_tensors
+        constants = _kernel_constants(math.isqrt(coeffs.shape[0]))
+        return kernels.sh_band_sums_backward(directions, coeffs, grad, constants, *ctx.needs_input_grad)
 
 
 @lru_cache(maxsize=64)
