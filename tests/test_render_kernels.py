@@ -58,6 +58,16 @@ def test_filtered_interpolation_matches_sparse_reference():
     assert_close(*both_paths(run))
 
 
+def test_vertex_normals_match_reference():
+    loss = Loss()
+    mesh = loss.mesh
+
+    def normals(vertices):
+        return type(mesh)(vertices, mesh.triangles, mesh.uvs, mesh.triangle_uvs).vertex_normals()
+
+    assert_close(*both_paths(lambda: values_and_grads(normals, [mesh.vertices])))
+
+
 def test_bilinear_lookup_matches_grid_sample_inside_and_at_the_border():
     gen = torch.Generator().manual_seed(0)
     texture = torch.rand(7, 5, 3, generator=gen, dtype=torch.float64)
@@ -76,6 +86,27 @@ def test_render_values_and_gradients_match_reference():
             return loss(vertices=vertices, textures=textures, sh=sh, params={**loss.params, "focal": focal})
 
         return values_and_grads(render, inputs)
+
+    assert_close(*both_paths(run))
+
+
+def test_every_screen_buffer_and_its_gradients_match_reference():
+    """The fused pixel kernel writes all RenderOutput buffers; each one's gradients match the torch path."""
+    loss = Loss()
+    cam = loss.camera(loss.params)
+    fragments = loss.renderer.fragments_for(loss.mesh, cam, loss.triangle_id)
+    textures = loss.textures
+    inputs = [loss.mesh.vertices, textures.diffuse, textures.specular, textures.roughness, loss.sh]
+    names = ("images", "uv", "normals", "depth", "diffuse", "specular", "roughness")
+
+    def run():
+        def buffers(vertices, diffuse, specular, roughness, sh):
+            mesh = type(loss.mesh)(vertices, loss.mesh.triangles, loss.mesh.uvs, loss.mesh.triangle_uvs)
+            frags = loss.renderer.fragments_for(mesh, cam, fragments.triangle_id)
+            out = loss.renderer.shade(mesh, cam, frags, type(textures)(diffuse, specular, roughness), sh, loss.transfer)
+            return torch.cat([getattr(out, name).reshape(-1) for name in names])
+
+        return values_and_grads(buffers, inputs)
 
     assert_close(*both_paths(run))
 

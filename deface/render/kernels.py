@@ -205,6 +205,25 @@ def sh_band_sums_backward(directions, coeffs, grad, constants, need_directions: 
     )
 
 
+# -- area-weighted vertex normals -------------------------------------------------------------------
+def vertex_normals_forward(vertices: torch.Tensor, triangles: torch.Tensor) -> torch.Tensor:
+    """Mesh.vertex_normals: unit sums of the incident faces' cross products, vertices [V, 3] -> [V, 3]."""
+    verts, tris = _array(vertices), _array(triangles)
+    offsets, slots = _corners_by_vertex(tris, verts.shape[0])
+    out = np.empty(verts.shape, dtype=verts.dtype)
+    _vertex_normals(verts, tris, offsets, slots, out)
+    return torch.from_numpy(out)
+
+
+def vertex_normals_backward(vertices: torch.Tensor, triangles: torch.Tensor, grad: torch.Tensor) -> torch.Tensor:
+    """Gradient of ``vertex_normals_forward`` to the vertices [V, 3], gathered per vertex (deterministic)."""
+    verts, tris = _array(vertices), _array(triangles)
+    offsets, slots = _corners_by_vertex(tris, verts.shape[0])
+    out = np.empty(verts.shape, dtype=verts.dtype)
+    _vertex_normals_vjp(verts, tris, offsets, slots, _array(grad), out)
+    return torch.from_numpy(out)
+
+
 # -- fused pixel shading ----------------------------------------------------------------------------
 SCREEN_CHANNELS = (2, 3, 1, 3, 3, 1)
 """Channels of the screen buffers ``shade_forward`` writes besides the images: uv, normals, depth,
@@ -404,61 +423,56 @@ if numba is not None:
             grad_uv[p, 1] = -d_fy * slope_y  # y = (1 - v) * Ht - 0.5
 
     @njit(inline="always")
-    def _edge_functions(p, q):
-        """Corner offsets d_i = p_i - q [3, 2] and s_i = cross(d_{i+1}, d_{i+2}) [3] (~2 x sub-areas)."""
-        d = np.empty((3, 2), dtype=p.dtype)
-        for i in range(3):
-            d[i, 0], d[i, 1] = p[i, 0] - q[0], p[i, 1] - q[1]
-        screen = np.empty(3, dtype=p.dtype)
-        for i in range(3):
-            j, k = (i + 1) % 3, (i + 2) % 3
-            screen[i] = d[j, 0] * d[k, 1] - d[j, 1] * d[k, 0]
-        return d, screen
+    def _edge_functions(p, q, n):
+        """Corner offsets d_i = p[n, i] - q[n] and s_i = cross(d_{i+1}, d_{i+2}) (~2 x sub-areas), as one flat
+        tuple (d0x, d1x, d2x, d0y, d1y, d2y, s0, s1, s2): scalars only, no per-pixel arrays."""
+        qx, qy = q[n, 0], q[n, 1]
+        d0x, d1x, d2x = p[n, 0, 0] - qx, p[n, 1, 0] - qx, p[n, 2, 0] - qx
+        d0y, d1y, d2y = p[n, 0, 1] - qy, p[n, 1, 1] - qy, p[n, 2, 1] - qy
+        return (
+            d0x, d1x, d2x, d0y, d1y, d2y, d1x * d2y - d1y * d2x, d2x * d0y - d2y * d0x, d0x * d1y - d0y * d1x
+        )  # fmt: skip
 
     @_serial_and_parallel
     def _barycentrics_forward(corners_px, depth, centres, tiny, out):
         for n in prange(out.shape[0]):
-            _, screen = _edge_functions(corners_px[n], centres[n])
-            area = screen[0] + screen[1] + screen[2]
+            edges = _edge_functions(corners_px, centres, n)
+            area = edges[6] + edges[7] + edges[8]
             if abs(area) < tiny:
                 area = tiny
-            w0 = screen[0] / area / depth[n, 0]
-            w1 = screen[1] / area / depth[n, 1]
-            w2 = screen[2] / area / depth[n, 2]
+            w0 = edges[6] / area / depth[n, 0]
+            w1 = edges[7] / area / depth[n, 1]
+            w2 = edges[8] / area / depth[n, 2]
             total = w0 + w1 + w2
             out[n, 0], out[n, 1], out[n, 2] = w0 / total, w1 / total, w2 / total
 
     @_serial_and_parallel
     def _barycentrics_backward(corners_px, depth, centres, tiny, grad, grad_p, grad_z):
         for n in prange(grad.shape[0]):
-            d, screen = _edge_functions(corners_px[n], centres[n])
-            area = screen[0] + screen[1] + screen[2]
+            edges = _edge_functions(corners_px, centres, n)
+            area = edges[6] + edges[7] + edges[8]
             degenerate = abs(area) < tiny
             if degenerate:
                 area = tiny
-            w = np.empty(3, dtype=screen.dtype)
-            for i in range(3):
-                w[i] = screen[i] / area / depth[n, i]
-            total = w[0] + w[1] + w[2]
-            mean = (grad[n, 0] * w[0] + grad[n, 1] * w[1] + grad[n, 2] * w[2]) / total
+            w0, w1, w2 = edges[6] / area / depth[n, 0], edges[7] / area / depth[n, 1], edges[8] / area / depth[n, 2]
+            total = w0 + w1 + w2
+            mean = (grad[n, 0] * w0 + grad[n, 1] * w1 + grad[n, 2] * w2) / total
             grad_area = 0.0
-            g_screen = np.empty(3, dtype=screen.dtype)
             for i in range(3):
                 h = (grad[n, i] - mean) / total  # d loss / d w_i
-                grad_z[n, i] = -h * w[i] / depth[n, i]
-                g_screen[i] = h / area / depth[n, i]
-                grad_area -= h * w[i] / area
+                w = edges[6 + i] / area / depth[n, i]
+                grad_z[n, i] = -h * w / depth[n, i]
+                grad_area -= h * w / area
+                grad_p[n, i, 0], grad_p[n, i, 1] = 0.0, 0.0
             if degenerate:
                 grad_area = 0.0
-            for i in range(3):
-                grad_p[n, i, 0], grad_p[n, i, 1] = 0.0, 0.0
             for i in range(3):  # s_i = d_j.x d_k.y - d_j.y d_k.x
                 j, k = (i + 1) % 3, (i + 2) % 3
-                g = g_screen[i] + grad_area
-                grad_p[n, j, 0] += g * d[k, 1]
-                grad_p[n, j, 1] -= g * d[k, 0]
-                grad_p[n, k, 0] -= g * d[j, 1]
-                grad_p[n, k, 1] += g * d[j, 0]
+                g = ((grad[n, i] - mean) / total) / area / depth[n, i] + grad_area
+                grad_p[n, j, 0] += g * edges[3 + k]
+                grad_p[n, j, 1] -= g * edges[k]
+                grad_p[n, k, 0] -= g * edges[3 + j]
+                grad_p[n, k, 1] += g * edges[j]
 
     @njit(inline="always")
     def _sh_rows_at(direction, constants, scratch, basis, d_basis, derivative):
@@ -855,3 +869,68 @@ if numba is not None:
                 weight = bary[p, i]
                 for c in range(out.shape[1]):
                     out[v, c] += weight * grad[p, c]
+
+    @njit(inline="always")
+    def _face_cross(vertices, triangles, f):
+        """(x1 - x0) x (x2 - x0) of face f and its two edges a = x1 - x0, b = x2 - x0."""
+        i0, i1, i2 = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        ax, ay, az = (
+            vertices[i1, 0] - vertices[i0, 0],
+            vertices[i1, 1] - vertices[i0, 1],
+            vertices[i1, 2] - vertices[i0, 2],
+        )
+        bx, by, bz = (
+            vertices[i2, 0] - vertices[i0, 0],
+            vertices[i2, 1] - vertices[i0, 1],
+            vertices[i2, 2] - vertices[i0, 2],
+        )
+        return (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx), (ax, ay, az), (bx, by, bz)
+
+    @njit(inline="always")
+    def _vertex_sum(vertices, triangles, offsets, slots, v):
+        """Sum of the incident faces' cross products at vertex v (faces in index order)."""
+        mx, my, mz = 0.0, 0.0, 0.0
+        for k in range(offsets[v], offsets[v + 1]):
+            cross, _, _ = _face_cross(vertices, triangles, slots[k] // 3)
+            mx, my, mz = mx + cross[0], my + cross[1], mz + cross[2]
+        return mx, my, mz
+
+    @njit(cache=True)
+    def _vertex_normals(vertices, triangles, offsets, slots, out):
+        for v in range(vertices.shape[0]):
+            mx, my, mz = _vertex_sum(vertices, triangles, offsets, slots, v)
+            norm = max(np.sqrt(mx * mx + my * my + mz * mz), 1e-12)
+            out[v, 0], out[v, 1], out[v, 2] = mx / norm, my / norm, mz / norm
+
+    @njit(cache=True)
+    def _vertex_normals_vjp(vertices, triangles, offsets, slots, grad, out):
+        # d loss / d (unnormalised sum) per vertex: n = m / max(|m|, 1e-12)
+        grad_sum = np.empty(vertices.shape)
+        for v in range(vertices.shape[0]):
+            mx, my, mz = _vertex_sum(vertices, triangles, offsets, slots, v)
+            norm = np.sqrt(mx * mx + my * my + mz * mz)
+            clamped = max(norm, 1e-12)
+            dot = grad[v, 0] * mx + grad[v, 1] * my + grad[v, 2] * mz
+            scale = dot / (clamped * clamped * norm) if norm >= 1e-12 else 0.0
+            grad_sum[v, 0] = grad[v, 0] / clamped - scale * mx
+            grad_sum[v, 1] = grad[v, 1] / clamped - scale * my
+            grad_sum[v, 2] = grad[v, 2] / clamped - scale * mz
+        for v in range(vertices.shape[0]):
+            gx, gy, gz = 0.0, 0.0, 0.0
+            for k in range(offsets[v], offsets[v + 1]):
+                f, corner = slots[k] // 3, slots[k] % 3
+                _, a, b = _face_cross(vertices, triangles, f)
+                cx, cy, cz = 0.0, 0.0, 0.0  # d loss / d cross product of face f
+                for i in range(3):
+                    w = triangles[f, i]
+                    cx, cy, cz = cx + grad_sum[w, 0], cy + grad_sum[w, 1], cz + grad_sum[w, 2]
+                # c = a x b: d/da = b x g, d/db = g x a; x1 enters a, x2 enters b, x0 both with a minus sign
+                if corner != 2:
+                    ex, ey, ez = b[1] * cz - b[2] * cy, b[2] * cx - b[0] * cz, b[0] * cy - b[1] * cx
+                    sign = 1.0 if corner == 1 else -1.0
+                    gx, gy, gz = gx + sign * ex, gy + sign * ey, gz + sign * ez
+                if corner != 1:
+                    ex, ey, ez = cy * a[2] - cz * a[1], cz * a[0] - cx * a[2], cx * a[1] - cy * a[0]
+                    sign = 1.0 if corner == 2 else -1.0
+                    gx, gy, gz = gx + sign * ex, gy + sign * ey, gz + sign * ez
+            out[v, 0], out[v, 1], out[v, 2] = gx, gy, gz

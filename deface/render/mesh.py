@@ -58,7 +58,9 @@ class Mesh:
         return torch.linalg.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
 
     def vertex_normals(self) -> torch.Tensor:
-        """Unit area-weighted vertex normals [V, 3], differentiable in the vertices."""
+        """Unit area-weighted vertex normals [V, 3], differentiable in the vertices (a numba kernel on the CPU)."""
+        if kernels.enabled(self.vertices):
+            return _KernelVertexNormals.apply(self.vertices, self.triangles)
         face = self.face_normals()  # [F, 3]
         summed = torch.zeros_like(self.vertices)
         for corner in range(3):
@@ -81,11 +83,18 @@ class Textures:
                 raise ValueError(f"Textures: {name} must be [Ht, Wt, {channels}], got {tuple(tex.shape)}")
 
     @staticmethod
-    def constant(size: int, diffuse=(0.5, 0.5, 0.5), specular=(0.04, 0.04, 0.04), roughness: float = 0.4,
-                 dtype: torch.dtype = torch.float32) -> Textures:
+    def constant(
+        size: int,
+        diffuse=(0.5, 0.5, 0.5),
+        specular=(0.04, 0.04, 0.04),
+        roughness: float = 0.4,
+        dtype: torch.dtype = torch.float32,
+    ) -> Textures:
         """Uniform maps of ``size`` x ``size`` texels."""
+
         def fill(values):
             return torch.tensor(values, dtype=dtype).expand(size, size, len(values)).clone()
+
         return Textures(fill(diffuse), fill(specular), fill((roughness,)))
 
 
@@ -111,6 +120,19 @@ def sample_texture(texture: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
         image, grid[None, None], mode="bilinear", padding_mode="border", align_corners=False
     )  # [1, C, 1, N]
     return sampled[0, :, 0].T
+
+
+class _KernelVertexNormals(torch.autograd.Function):
+    """The numba path of ``Mesh.vertex_normals``: per-vertex sums over the incident faces, gathered both ways."""
+
+    @staticmethod
+    def forward(ctx, vertices, triangles):
+        ctx.save_for_backward(vertices, triangles)
+        return kernels.vertex_normals_forward(vertices, triangles)
+
+    @staticmethod
+    def backward(ctx, grad):
+        return kernels.vertex_normals_backward(*ctx.saved_tensors, grad), None
 
 
 class _BilinearLookup(torch.autograd.Function):
