@@ -36,4 +36,4 @@ def test_benchmark_smoke_run_writes_metrics_and_tables(photos, tmp_path):
     update_benchmarks_md(report, section)  # idempotent: the section is replaced, not appended twice
     text = report.read_text()
     assert "kept text" in text and text.count("## Texture recovery") == 1
-    assert "| Ours |" in text and "| NextFace* | not run" in text
+    assert "| Ours (default preset) |" in text and "| NextFace* | not run" in text

@@ -125,12 +125,14 @@ class FitConfig:
     """Stage 3 updates textures through a 3x3 Gaussian (against texel aliasing; see stage3.TextureParameters).
     Off by default: on two benchmark pairs it improved the source fit (+1 dB) but not the texture transfer
     (target synthesis -0.3 and -1.0 dB; BENCHMARKS.md)."""
-    supersampling: int = 1
+    supersampling: int = 2
     """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
     render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between
-    pixel centres."""
-    render_blur: bool = True
-    """L_pho compares a 3x3-Gaussian-blurred render with the photo (the authors' code)."""
+    pixel centres (the paper's path tracer averaged several samples per pixel too). 1 = one sample."""
+    render_blur: bool = False
+    """L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
+    their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
+    almost invisible to the loss, which stage 3 then bakes into the texture (BENCHMARKS.md)."""
     shadows: bool = True
     """Ray-traced self-shadowing in the renderer."""
     shadow_rays: int = 128
