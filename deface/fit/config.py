@@ -121,10 +121,6 @@ class FitConfig:
     iterations: Iterations = field(default_factory=Iterations)
     learning_rates: LearningRates = field(default_factory=LearningRates)
     priors: PriorConfig = field(default_factory=PriorConfig)
-    texture_filter: bool = False
-    """Stage 3 updates textures through a 3x3 Gaussian (against texel aliasing; see stage3.TextureParameters).
-    Off by default: on two benchmark pairs it improved the source fit (+1 dB) but not the texture transfer
-    (target synthesis -0.3 and -1.0 dB; BENCHMARKS.md)."""
     supersampling: int = 2
     """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
     render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between

@@ -14,7 +14,6 @@ import torch
 
 from deface.fit.stage2 import FrameRender, StageContext
 from deface.losses import decouple as decouple_losses
-from deface.losses.photometric import blur3
 from deface.losses.texture import texture_regularisers
 from deface.priors.global_prior import global_prior, kmeans_palette
 from deface.priors.local_prior import local_prior
@@ -36,24 +35,17 @@ class FrozenFrame:
 
 
 class TextureParameters(torch.nn.Module):
-    """The stage-3 UV maps as T^0 + update, clamped to valid ranges in :meth:`textures`.
+    """The stage-3 UV maps as T^0 + update, clamped to valid ranges in :meth:`textures`."""
 
-    With ``filtered`` the update passes through a 3x3 Gaussian: the photometric gradient reaches texels only
-    through the bilinear taps at pixel centres, which leaves checkerboard speckle where texels outnumber
-    pixels (the path tracer the paper used averaged 8 samples per pixel instead).
-    """
-
-    def __init__(self, initial: Textures, filtered: bool = True):
+    def __init__(self, initial: Textures):
         super().__init__()
         self.initial = initial
-        self.filtered = filtered
         self.diffuse = torch.nn.Parameter(torch.zeros_like(initial.diffuse))  # [Ht, Wt, 3] update
         self.specular = torch.nn.Parameter(torch.zeros_like(initial.specular))  # [Ht, Wt, 3] update
         self.roughness = torch.nn.Parameter(torch.zeros_like(initial.roughness))  # [Ht, Wt, 1] update
 
     def _map(self, name: str) -> torch.Tensor:
-        update = getattr(self, name)
-        return getattr(self.initial, name).detach() + (blur3(update) if self.filtered else update)
+        return getattr(self.initial, name).detach() + getattr(self, name)
 
     def textures(self) -> Textures:
         return Textures(self._map("diffuse").clamp(0, 1), self._map("specular").clamp(0, 1),
@@ -80,7 +72,7 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     """Refine textures from T^0 with the frames' geometry frozen."""
     initial = initial_textures(context)
     frozen = freeze_frames(context, initial)
-    parameters = TextureParameters(initial, context.config.texture_filter)
+    parameters = TextureParameters(initial)
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
     palette = _palette(context, initial)
     uv_mask = _uv_mask(context, initial)

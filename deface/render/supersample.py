@@ -20,6 +20,8 @@ from deface.render.renderer import RenderOutput
 def supersampled_camera(camera: Camera, factor: int) -> Camera:
     """The same view on a grid ``factor`` x finer: sample (i, j) of pixel (x, y) sits at
     x + (i + 0.5) / factor, y + (j + 0.5) / factor in the original pixel units (stratified)."""
+    if factor < 1:
+        raise ValueError(f"supersampling factor must be >= 1, got {factor}")
     if factor == 1:
         return camera
     return Camera(camera.focal * factor, camera.rotation, camera.translation,
