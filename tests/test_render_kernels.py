@@ -68,6 +68,14 @@ def test_vertex_normals_match_reference():
     assert_close(*both_paths(lambda: values_and_grads(normals, [mesh.vertices])))
 
 
+def test_primary_rays_only_in_triangle_boxes_find_the_same_triangles():
+    """Tracing only pixels inside some triangle's projected box misses no hit (same ids as the whole box)."""
+    loss = Loss()
+    for params in (loss.params, {**loss.params, "focal": torch.tensor(90.0, dtype=torch.float64)}):
+        fast, reference = both_paths(lambda p=params: [loss.renderer.rasterize(loss.mesh, loss.camera(p)).triangle_id])
+        assert torch.equal(fast[0], reference[0]) and bool((fast[0] >= 0).any())
+
+
 def test_bilinear_lookup_matches_grid_sample_inside_and_at_the_border():
     gen = torch.Generator().manual_seed(0)
     texture = torch.rand(7, 5, 3, generator=gen, dtype=torch.float64)

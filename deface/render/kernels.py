@@ -224,6 +224,18 @@ def vertex_normals_backward(vertices: torch.Tensor, triangles: torch.Tensor, gra
     return torch.from_numpy(out)
 
 
+# -- primary-ray selection --------------------------------------------------------------------------
+def triangle_box_pixels(pixels: torch.Tensor, triangles: torch.Tensor, height: int, width: int) -> np.ndarray:
+    """Flat indices (ascending) of the pixels whose centre lies in some triangle's projected bounding box,
+    widened by one pixel against rounding: vertices projected to pixels [V, 2], triangles [F, 3].
+
+    Only valid when every vertex is in front of the camera (otherwise the projected boxes mean nothing).
+    """
+    mask = np.zeros((height, width), dtype=np.bool_)
+    _mark_triangle_boxes(_array(pixels), _array(triangles), mask)
+    return np.flatnonzero(mask)
+
+
 # -- fused pixel shading ----------------------------------------------------------------------------
 SCREEN_CHANNELS = (2, 3, 1, 3, 3, 1)
 """Channels of the screen buffers ``shade_forward`` writes besides the images: uv, normals, depth,
@@ -934,3 +946,21 @@ if numba is not None:
                     sign = 1.0 if corner == 2 else -1.0
                     gx, gy, gz = gx + sign * ex, gy + sign * ey, gz + sign * ez
             out[v, 0], out[v, 1], out[v, 2] = gx, gy, gz
+
+    @njit(cache=True)
+    def _mark_triangle_boxes(pixels, triangles, mask):
+        height, width = mask.shape
+        for f in range(triangles.shape[0]):
+            i0, i1, i2 = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+            lo_x = min(pixels[i0, 0], pixels[i1, 0], pixels[i2, 0])
+            hi_x = max(pixels[i0, 0], pixels[i1, 0], pixels[i2, 0])
+            lo_y = min(pixels[i0, 1], pixels[i1, 1], pixels[i2, 1])
+            hi_y = max(pixels[i0, 1], pixels[i1, 1], pixels[i2, 1])
+            if not (np.isfinite(lo_x) and np.isfinite(hi_x) and np.isfinite(lo_y) and np.isfinite(hi_y)):
+                continue  # a degenerate (NaN) triangle: no ray can hit it
+            # pixel x has its centre at x + 0.5: centres in [lo - 1, hi + 1] (one pixel of slack)
+            x0, x1 = max(int(np.floor(lo_x - 1.5)), 0), min(int(np.ceil(hi_x + 0.5)), width - 1)
+            y0, y1 = max(int(np.floor(lo_y - 1.5)), 0), min(int(np.ceil(hi_y + 0.5)), height - 1)
+            for y in range(y0, y1 + 1):
+                for x in range(x0, x1 + 1):
+                    mask[y, x] = True

@@ -134,12 +134,14 @@ class Renderer:
         )
 
     def _cast_primary(self, mesh: Mesh, camera: Camera) -> np.ndarray:
-        """[H*W] triangle ids; only pixels inside the projected bounding box of the mesh are traced."""
+        """[H*W] triangle ids; only pixels inside the projected bounding box of the mesh (with the numba
+        kernels: of some triangle) are traced."""
         height, width = camera.height, camera.width
         with torch.no_grad():
             pixels, depth = camera.project(mesh.vertices.detach())
         triangle_id = np.full(height * width, -1, dtype=np.int64)
-        if bool((depth <= 0).any()):  # a vertex behind the camera: the projected box is meaningless
+        in_front = bool((depth > 0).all())
+        if not in_front:  # a vertex behind the camera: the projected box is meaningless
             x0, y0, x1, y1 = 0, 0, width, height
         else:
             lo = pixels.min(0).values.floor().long().tolist()
@@ -148,9 +150,15 @@ class Renderer:
             x1, y1 = min(hi[0] + 1, width), min(hi[1] + 1, height)
         if x0 >= x1 or y0 >= y1:
             return triangle_id
-        ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
-        flat = (ys * width + xs).reshape(-1)
-        origins, directions = _pixel_rays(camera, xs.reshape(-1) + 0.5, ys.reshape(-1) + 0.5)
+        if in_front and kernels.enabled(pixels):
+            # only pixels inside some triangle's projected box (a ray elsewhere cannot hit): ~half as many rays
+            flat = kernels.triangle_box_pixels(pixels, mesh.triangles, height, width)
+            ys, xs = np.divmod(flat, width)
+        else:
+            ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
+            ys, xs = ys.reshape(-1), xs.reshape(-1)
+            flat = ys * width + xs
+        origins, directions = _pixel_rays(camera, xs + 0.5, ys + 0.5)
         triangle_id[flat] = self.ray_scene(mesh).first_triangles(origins, directions)
         return triangle_id
 
