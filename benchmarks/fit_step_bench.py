@@ -1,9 +1,11 @@
-"""Time one stage-2 step (render K lights + f + g + losses + backward) of a real photo fit.
+"""Time one stage-2 or stage-3 step (render K lights + f (+ g) + losses + backward) of a real photo fit.
 
     DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/fit_step_bench.py [PHOTO] [--resolution 256]
+        [--stage 2|3] [--supersampling S]
 
-Prints the median wall and thread-CPU time of a stage-2 step before ACE (all n lights) at the default
-preset, with 1 torch thread (the default of `deface fit`).
+Prints the median wall and thread-CPU time of a step at the default preset with 1 torch thread (the
+default of `deface fit`): stage 2 before ACE (all n lights); stage 3 with all n lights kept (an upper
+bound: ACE usually keeps fewer) at `--supersampling` samples per pixel side.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import time
 
 import torch
 
-from deface.fit import pipeline, presets
+from deface.fit import pipeline, presets, stage3
 from deface.fit.config import override
 from deface.fit.log import FitLog
 from deface.fit.stage2 import _stage2_loss
@@ -30,22 +32,47 @@ def main() -> None:
     parser.add_argument("photo", nargs="?", default=default_photo)
     parser.add_argument("--resolution", type=int, default=256)
     parser.add_argument("--repeats", type=int, default=10)
+    parser.add_argument("--stage", type=int, choices=(2, 3), default=2)
+    parser.add_argument("--supersampling", type=int, default=None, help="stage 3 (default: the preset's)")
     args = parser.parse_args()
     torch.set_num_threads(1)
     config = override(presets.get("default"), resolution=args.resolution)
+    if args.supersampling:
+        config = override(config, supersampling=args.supersampling)
     log = FitLog(quiet=True)
     work, landmarks, scale, _ = pipeline.detect([load_image(args.photo)], config, str(args.photo), False)
     context = pipeline._stage1(load_face_model("ict"), FitTarget(work, landmarks, scale), config, log)
     pipeline._face_classifier(context, config, None, log)
     _stage2_loss(context, True, True).backward()  # shadow transfer and caches
+    step = _stage2_step(context) if args.stage == 2 else _stage3_step(context)
     walls, cpus = [], []
     for _ in range(args.repeats):
         wall, cpu = time.perf_counter(), time.thread_time()
-        _stage2_loss(context, True, False).backward()
+        step()
         walls.append(time.perf_counter() - wall)
         cpus.append(time.thread_time() - cpu)
-    print(f"{args.resolution}² stage-2 step, {config.lights.num_lights} lights: wall median "
+    detail = f", {config.supersampling}x{config.supersampling} samples per pixel" if args.stage == 3 else ""
+    print(f"{args.resolution}² stage-{args.stage} step, {config.lights.num_lights} lights{detail}: wall median "
           f"{statistics.median(walls) * 1000:.0f} ms, thread CPU median {statistics.median(cpus) * 1000:.0f} ms")
+
+
+def _stage2_step(context):
+    return lambda: _stage2_loss(context, True, False).backward()
+
+
+def _stage3_step(context):
+    initial = stage3.initial_textures(context)
+    frozen = stage3.freeze_frames(context, initial)
+    parameters = stage3.TextureParameters(initial)
+    palette, uv_mask = stage3._palette(context, initial), stage3._uv_mask(context, initial)
+
+    def step():
+        textures = parameters.textures()
+        loss = sum(stage3._frame_loss(context, frame, textures, None) for frame in frozen)
+        loss = loss + stage3._texture_terms(context, textures, initial, palette, uv_mask)
+        loss.backward()
+
+    return step
 
 
 if __name__ == "__main__":
