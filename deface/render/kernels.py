@@ -643,13 +643,30 @@ if numba is not None:
         """Interpolated uv [N, 2] of the covered pixels."""
         out = np.empty((bary.shape[0], 2), dtype=bary.dtype)
         for p in range(bary.shape[0]):
-            for a in range(2):
-                out[p, a] = (
-                    bary[p, 0] * uvs[uv_corners[p, 0], a]
-                    + bary[p, 1] * uvs[uv_corners[p, 1], a]
-                    + bary[p, 2] * uvs[uv_corners[p, 2], a]
-                )
+            out[p, 0], out[p, 1] = _uv_at(uvs, bary, uv_corners, p)
         return out
+
+    @njit(inline="always")
+    def _uv_at(uvs, bary, uv_corners, p):
+        """Interpolated (u, v) of covered pixel p."""
+        c0, c1, c2 = uv_corners[p, 0], uv_corners[p, 1], uv_corners[p, 2]
+        b0, b1, b2 = bary[p, 0], bary[p, 1], bary[p, 2]
+        return b0 * uvs[c0, 0] + b1 * uvs[c1, 0] + b2 * uvs[c2, 0], b0 * uvs[c0, 1] + b1 * uvs[c1, 1] + b2 * uvs[c2, 1]
+
+    @njit(inline="always")
+    def _pixel_inputs(plain, flat_bands, uvs, bary, roughness_map, p, corners, uv_corners, values, summed, lobe, lit):
+        """What forward and backward both need at covered pixel p: the interpolated per-vertex values and
+        band sums (into ``values``, ``summed``), the Phong filter and filtered specular (``lobe``, ``lit``);
+        returns u, v, the bilinear set-up, the roughness, the exponent and d exponent / d roughness (one flat
+        tuple: nested tuples trip numba's parfor analysis)."""
+        _interpolate_row(plain, corners, bary, p, values)
+        _interpolate_row(flat_bands, corners, bary, p, summed)
+        u, v = _uv_at(uvs, bary, uv_corners, p)
+        x0, x1, fx, slope_x, y0, y1, fy, slope_y = _bilinear_setup(u, v, roughness_map.shape[0], roughness_map.shape[1])
+        roughness = _bilinear_sample(roughness_map, x0, x1, fx, y0, y1, fy, 0)
+        exponent, d_exponent = _phong_lobe(roughness, lobe)
+        _filter_bands(summed, lobe, lit)
+        return u, v, x0, x1, fx, slope_x, y0, y1, fy, slope_y, roughness, exponent, d_exponent
 
     @njit(inline="always")
     def _phong_lobe(roughness, lobe):
@@ -712,30 +729,16 @@ if numba is not None:
         num_channels, bands = bands_v.shape[2], bands_v.shape[1]
         lights = num_channels // 3
         width = images.shape[2]
-        tex_h, tex_w = diffuse_map.shape[0], diffuse_map.shape[1]
         flat_bands = bands_v.reshape(bands_v.shape[0], bands * num_channels)
         for block in prange((bary.shape[0] + 255) // 256):
             values, summed = np.empty(plain.shape[1], dtype=plain.dtype), np.empty(bands * num_channels)
             lobe, lit = np.empty(bands), np.empty(num_channels)
             for p in range(block * 256, min(bary.shape[0], (block + 1) * 256)):
                 y, x = covered[p] // width, covered[p] % width
-                _interpolate_row(plain, corners, bary, p, values)
-                _interpolate_row(flat_bands, corners, bary, p, summed)
-                u = (
-                    bary[p, 0] * uvs[uv_corners[p, 0], 0]
-                    + bary[p, 1] * uvs[uv_corners[p, 1], 0]
-                    + bary[p, 2] * uvs[uv_corners[p, 2], 0]
+                u, v, x0, x1, fx, _, y0, y1, fy, _, roughness, _, _ = _pixel_inputs(
+                    plain, flat_bands, uvs, bary, roughness_map, p, corners, uv_corners, values, summed, lobe, lit
                 )
-                v = (
-                    bary[p, 0] * uvs[uv_corners[p, 0], 1]
-                    + bary[p, 1] * uvs[uv_corners[p, 1], 1]
-                    + bary[p, 2] * uvs[uv_corners[p, 2], 1]
-                )
-                x0, x1, fx, _, y0, y1, fy, _ = _bilinear_setup(u, v, tex_h, tex_w)
-                roughness = _bilinear_sample(roughness_map, x0, x1, fx, y0, y1, fy, 0)
-                _phong_lobe(roughness, lobe)
                 visibility = values[num_channels + 4]
-                _filter_bands(summed, lobe, lit)
                 for c in range(3):
                     d = _bilinear_sample(diffuse_map, x0, x1, fx, y0, y1, fy, c)
                     s = _bilinear_sample(specular_map, x0, x1, fx, y0, y1, fy, c)
@@ -781,29 +784,15 @@ if numba is not None:
     ):
         num_channels, bands = bands_v.shape[2], bands_v.shape[1]
         lights = num_channels // 3
-        tex_h, tex_w = diffuse_map.shape[0], diffuse_map.shape[1]
         flat_bands = bands_v.reshape(bands_v.shape[0], bands * num_channels)
         for block in prange((bary.shape[0] + 255) // 256):
             values, summed = np.empty(plain.shape[1], dtype=plain.dtype), np.empty(bands * num_channels)
             lobe, lit, g_lit = np.empty(bands), np.empty(num_channels), np.empty(num_channels)
             for p in range(block * 256, min(bary.shape[0], (block + 1) * 256)):
                 y, x = covered[p] // width, covered[p] % width
-                _interpolate_row(plain, corners, bary, p, values)
-                _interpolate_row(flat_bands, corners, bary, p, summed)
-                u = (
-                    bary[p, 0] * uvs[uv_corners[p, 0], 0]
-                    + bary[p, 1] * uvs[uv_corners[p, 1], 0]
-                    + bary[p, 2] * uvs[uv_corners[p, 2], 0]
+                _, _, x0, x1, fx, slope_x, y0, y1, fy, slope_y, _, exponent, d_exponent = _pixel_inputs(
+                    plain, flat_bands, uvs, bary, roughness_map, p, corners, uv_corners, values, summed, lobe, lit
                 )
-                v = (
-                    bary[p, 0] * uvs[uv_corners[p, 0], 1]
-                    + bary[p, 1] * uvs[uv_corners[p, 1], 1]
-                    + bary[p, 2] * uvs[uv_corners[p, 2], 1]
-                )
-                x0, x1, fx, slope_x, y0, y1, fy, slope_y = _bilinear_setup(u, v, tex_h, tex_w)
-                roughness = _bilinear_sample(roughness_map, x0, x1, fx, y0, y1, fy, 0)
-                exponent, d_exponent = _phong_lobe(roughness, lobe)
-                _filter_bands(summed, lobe, lit)
                 visibility = values[num_channels + 4]
                 g_visibility = 0.0
                 d_fx, d_fy = 0.0, 0.0  # d loss / d bilinear fractions, summed over the three maps

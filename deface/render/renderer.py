@@ -265,13 +265,14 @@ class Renderer:
         )
 
     def _fused(self, sh_lights, textures: Textures, mesh: Mesh, bary: torch.Tensor) -> bool:
-        """Whether ``shade`` runs the fused numba pixel kernel (specular on, one dtype, fixed uvs)."""
+        """Whether ``shade`` runs the fused numba pixel kernel (specular on, one dtype and size, fixed uvs)."""
         maps = (textures.diffuse, textures.specular, textures.roughness)
         return (
             self.config.specular
             and not mesh.uvs.requires_grad
             and kernels.enabled(sh_lights, bary, *maps)
             and len({t.dtype for t in (sh_lights, bary, *maps)}) == 1
+            and len({t.shape[:2] for t in maps}) == 1  # one bilinear set-up serves the three maps
         )
 
     def render(
