@@ -122,7 +122,7 @@ def test_benchmark_table_has_an_id_column_with_a_dash_when_missing(tmp_path):
         (out / name / "timing.json").write_text(json.dumps({"seconds_per_fit": [12.0]}))
     text = report_markdown(out, tmp_path / "pairs", "smoke", "deface bench run ...")
     header = next(line for line in text.splitlines() if line.startswith("| | PSNR face"))
-    ours = next(line for line in text.splitlines() if line.startswith("| Ours |"))
+    ours = next(line for line in text.splitlines() if line.startswith("| Ours (default preset) |"))
     nextface = next(line for line in text.splitlines() if line.startswith("| NextFace |"))
     assert "ID dist" in header and header.count("|") == ours.count("|") == nextface.count("|")
     assert "| 0.432 | 12 |" in ours and "| - | 12 |" in nextface
