@@ -1,0 +1,35 @@
+"""Presets: the default is the documented `deface` preset, which differs from `paper` only where BENCHMARKS.md
+says why."""
+
+from __future__ import annotations
+
+from deface.fit import presets
+from deface.fit.config import to_dict
+
+
+def _flatten(tree: dict, prefix: str = "") -> dict:
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def test_default_is_the_deface_preset():
+    assert presets.get("default") == presets.get("deface")
+    assert presets.get("default").preset == "deface"
+
+
+def test_deface_differs_from_paper_only_in_face_region_and_ace_threshold():
+    paper, deface = _flatten(to_dict(presets.get("paper"))), _flatten(to_dict(presets.get("deface")))
+    changed = {key for key in paper if paper[key] != deface[key]}
+    assert changed == {"preset", "decouple.face_region", "decouple.epsilon"}
+    assert deface["decouple.face_region"] is False and deface["decouple.epsilon"] == 0.09
+
+
+def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():
+    for name in presets.names():
+        config = presets.get(name)
+        assert config.supersampling == 2 and config.render_blur is False, name
