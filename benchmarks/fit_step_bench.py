@@ -62,17 +62,9 @@ def _stage2_step(context):
 
 def _stage3_step(context):
     initial = stage3.initial_textures(context)
-    frozen = stage3.freeze_frames(context, initial)
     parameters = stage3.TextureParameters(initial)
-    palette, uv_mask = stage3._palette(context, initial), stage3._uv_mask(context, initial)
-
-    def step():
-        textures = parameters.textures()
-        loss = sum(stage3._frame_loss(context, frame, textures, None) for frame in frozen)
-        loss = loss + stage3._texture_terms(context, textures, initial, palette, uv_mask)
-        loss.backward()
-
-    return step
+    loss_of = stage3.objective(context, stage3.freeze_frames(context, initial), initial)
+    return lambda: loss_of(parameters.textures()).backward()
 
 
 if __name__ == "__main__":

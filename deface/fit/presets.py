@@ -31,6 +31,7 @@ from deface.fit.config import (
     LightConfig,
     PriorConfig,
     Weights,
+    override,
 )
 
 # Chosen by the evaluation benchmark (BENCHMARKS.md records the comparison).
@@ -68,14 +69,8 @@ def _deface() -> FitConfig:
 
 
 def _fast() -> FitConfig:
-    return FitConfig(
-        preset="fast",
-        resolution=192,
-        texture_size=256,
-        iterations=Iterations(stage1=150, stage2=150, stage3=60),
-        decouple=DecoupleConfig(ace_iteration=50, face_region=False, epsilon=0.09),
-        shadow_rays=64,
-    )
+    return override(_deface(), preset="fast", resolution=192, texture_size=256, shadow_rays=64,
+                    iterations=Iterations(stage1=150, stage2=150, stage3=60), **{"decouple.ace_iteration": 50})
 
 
 PRESETS = {

@@ -35,21 +35,16 @@ class FrozenFrame:
 
 
 class TextureParameters(torch.nn.Module):
-    """The stage-3 UV maps as T^0 + update, clamped to valid ranges in :meth:`textures`."""
+    """The stage-3 UV maps, stored unconstrained and mapped to valid ranges by clamping in :meth:`textures`."""
 
     def __init__(self, initial: Textures):
         super().__init__()
-        self.initial = initial
-        self.diffuse = torch.nn.Parameter(torch.zeros_like(initial.diffuse))  # [Ht, Wt, 3] update
-        self.specular = torch.nn.Parameter(torch.zeros_like(initial.specular))  # [Ht, Wt, 3] update
-        self.roughness = torch.nn.Parameter(torch.zeros_like(initial.roughness))  # [Ht, Wt, 1] update
-
-    def _map(self, name: str) -> torch.Tensor:
-        return getattr(self.initial, name).detach() + getattr(self, name)
+        self.diffuse = torch.nn.Parameter(initial.diffuse.detach().clone())  # [Ht, Wt, 3]
+        self.specular = torch.nn.Parameter(initial.specular.detach().clone())  # [Ht, Wt, 3]
+        self.roughness = torch.nn.Parameter(initial.roughness.detach().clone())  # [Ht, Wt, 1]
 
     def textures(self) -> Textures:
-        return Textures(self._map("diffuse").clamp(0, 1), self._map("specular").clamp(0, 1),
-                        self._map("roughness").clamp(0.05, 1))
+        return Textures(self.diffuse.clamp(0, 1), self.specular.clamp(0, 1), self.roughness.clamp(0.05, 1))
 
 
 def initial_textures(context: StageContext) -> Textures:
@@ -74,14 +69,11 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     frozen = freeze_frames(context, initial)
     parameters = TextureParameters(initial)
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
-    palette = _palette(context, initial)
-    uv_mask = _uv_mask(context, initial)
+    loss_of = objective(context, frozen, initial, human_prior)
     history = []
     for step in range(context.config.iterations.stage3):
         optimiser.zero_grad(set_to_none=True)
-        textures = parameters.textures()
-        loss = sum(_frame_loss(context, f, textures, human_prior) for f in frozen) / len(frozen)
-        loss = loss + _texture_terms(context, textures, initial, palette, uv_mask)
+        loss = loss_of(parameters.textures())
         loss.backward()
         optimiser.step()
         value = float(loss.detach())
@@ -89,6 +81,17 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
         context.log.step("stage 3", step, context.config.iterations.stage3, value)
     with torch.no_grad():
         return Stage3Result(parameters.textures(), initial, frozen, history)
+
+
+def objective(context: StageContext, frozen: list[FrozenFrame], initial: Textures, human_prior=None):
+    """The stage-3 loss as a function of the textures; its texture-space constants are computed once."""
+    palette, uv_mask = _palette(context, initial), _uv_mask(context, initial)
+
+    def loss_of(textures: Textures) -> torch.Tensor:
+        loss = sum(_frame_loss(context, f, textures, human_prior) for f in frozen) / len(frozen)
+        return loss + _texture_terms(context, textures, initial, palette, uv_mask)
+
+    return loss_of
 
 
 def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, object]:
