@@ -41,6 +41,9 @@ class DecoupleConfig:
     """Formulas of L_area / L_bin / L_seg / L_pho as in the authors' code or as printed in the paper."""
     hidden: tuple[int, ...] = (16, 64, 64)
     """Hidden widths of f (the authors' 3->16->64->64->n)."""
+    fourier_frequencies: int = 0
+    """Octaves of sin/cos(2^k pi p) features on f's input (0 = the authors' raw (x, y, t)); more let the
+    masks follow sharper, thinner shadows."""
     face_region_source: Literal["auto", "skin", "bisenet", "none"] = "auto"
     """Classifier h distilled into g: BiSeNet with the user's checkpoint when present ("auto"), else the
     project's skin-colour model ("skin"); "none" uses the render mask."""

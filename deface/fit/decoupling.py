@@ -23,7 +23,11 @@ class Decoupling(torch.nn.Module):
         super().__init__()
         width, height = size
         self.config = config
-        self.light_field = LightMaskField(num_lights, hidden=config.hidden) if config.light_masks else None
+        self.light_field = (
+            LightMaskField(num_lights, hidden=config.hidden, fourier_frequencies=config.fourier_frequencies)
+            if config.light_masks
+            else None
+        )
         self.region_field = FaceRegionField() if config.face_region else None
         self.register_buffer("coords", video_coordinates(num_frames, height, width))  # [T, H, W, 3]
         self._kept = list(range(num_lights))
