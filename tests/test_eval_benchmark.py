@@ -29,6 +29,14 @@ def test_benchmark_smoke_run_writes_metrics_and_tables(photos, tmp_path):
     # Cached: a second run re-fits nothing and gives the same numbers.
     run_benchmark(tmp_path / "pairs", out, ["ours"], schedule="smoke", jobs=1, log=lambda _: None)
     assert json.loads((out / "ours" / "metrics.json").read_text()) == metrics
+    # A cache fitted with another configuration (e.g. before a default changed) is refitted, not reused.
+    cached = out / "ours" / "one" / "scores.json"
+    stale = json.loads(cached.read_text())
+    stale["config"]["lights"]["num_lights"] += 1
+    stale["target"]["face"]["psnr"] = -1.0
+    cached.write_text(json.dumps(stale))
+    run_benchmark(tmp_path / "pairs", out, ["ours"], schedule="smoke", jobs=1, log=lambda _: None)
+    assert json.loads((out / "ours" / "metrics.json").read_text()) == metrics
     report = tmp_path / "BENCHMARKS.md"
     report.write_text("# Benchmarks\n\nkept text\n")
     section = report_markdown(out, tmp_path / "pairs", "smoke", "deface bench run ...")

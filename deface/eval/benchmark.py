@@ -20,7 +20,7 @@ from pathlib import Path
 from deface.eval.pairs import Pair, read_pairs
 from deface.eval.report import PairScores, write_metrics_json
 from deface.fit import presets
-from deface.fit.config import FitConfig, override
+from deface.fit.config import FitConfig, override, to_dict
 
 
 @dataclass(frozen=True)
@@ -78,18 +78,25 @@ def variant_config(variant: Variant, schedule: str) -> FitConfig:
 
 
 def _run_pair(task: tuple) -> tuple[str, str, float]:
-    """Worker: one variant on one pair; cached in OUT/<variant>/<pair>/scores.json."""
+    """Worker: one variant on one pair; cached in OUT/<variant>/<pair>/scores.json with its configuration."""
     from deface.eval.protocol import evaluate_pair
 
     variant_name, schedule, pair, out_dir, models_dir = task
     folder = Path(out_dir) / variant_name / pair.name
     cached = folder / "scores.json"
-    if cached.exists():
+    config = variant_config(VARIANTS[variant_name], schedule)
+    # Reuse only scores fitted with this very configuration: a changed default or schedule refits.
+    if cached.exists() and json.loads(cached.read_text()).get("config") == _as_json(config):
         return variant_name, pair.name, json.loads(cached.read_text())["seconds_per_fit"]
-    outcome = evaluate_pair(pair, variant_config(VARIANTS[variant_name], schedule), folder, models_dir)
+    outcome = evaluate_pair(pair, config, folder, models_dir)
     cached.write_text(json.dumps({"source": outcome.scores.source, "target": outcome.scores.target,
-                                  "seconds_per_fit": outcome.seconds_per_fit}, indent=1))
+                                  "seconds_per_fit": outcome.seconds_per_fit, "config": _as_json(config)}, indent=1))
     return variant_name, pair.name, outcome.seconds_per_fit
+
+
+def _as_json(config: FitConfig) -> dict:
+    """The configuration as it reads back from JSON (tuples become lists), for cache comparison."""
+    return json.loads(json.dumps(to_dict(config)))
 
 
 def run_benchmark(pairs_dir: Path, out_dir: Path, variants: list[str], schedule: str = "quick",
