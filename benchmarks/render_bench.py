@@ -5,7 +5,7 @@ textures, SH and vertices), the time of one shadow-transfer refresh, the primary
 peak memory. Usage:
 
     DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/render_bench.py [--repeats 20] [--threads 1]
-        [--kernels numba|torch]
+        [--kernels numba|torch] [--kernel-threads 2]
 
 The machine is shared: the script reports the median and the minimum over repeats, and the load average;
 for the 256² step also the CPU time of the calling thread (stable under load with --threads 1; numba's
@@ -63,22 +63,31 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=20)
     parser.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
     parser.add_argument("--kernels", choices=["numba", "torch"], default="numba", help="renderer kernels")
+    parser.add_argument(
+        "--kernel-threads", type=int, default=0, help="threads of the numba kernels (0: as many as torch)"
+    )
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)  # on a busy shared machine 1 thread is far more stable
+    kernels.set_threads(args.kernel_threads or None)
     with kernels.backend(args.kernels):
         run(args)
 
 
 def run(args) -> None:
-    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, kernels {args.kernels} "
-          f"(numba {'present' if kernels.numba is not None else 'missing'}), load average {os.getloadavg()}")
+    print(
+        f"torch {torch.__version__}, threads {torch.get_num_threads()}, kernels {args.kernels} "
+        f"({args.kernel_threads or torch.get_num_threads()} threads) "
+        f"(numba {'present' if kernels.numba is not None else 'missing'}), load average {os.getloadavg()}"
+    )
 
     renderer = Renderer(RenderConfig())
     mesh, _, _, _ = scene(256)
     median, best = timed(lambda: renderer.shadow_transfer(mesh), max(3, args.repeats // 5))
-    print(f"shadow transfer refresh (V={mesh.num_vertices}, S={renderer.config.shadow_rays}): "
-          f"median {median:.0f} ms, min {best:.0f} ms")
+    print(
+        f"shadow transfer refresh (V={mesh.num_vertices}, S={renderer.config.shadow_rays}): "
+        f"median {median:.0f} ms, min {best:.0f} ms"
+    )
     transfer = renderer.shadow_transfer(mesh)
 
     for resolution in (256, 512):
@@ -93,9 +102,11 @@ def run(args) -> None:
             out.images.sum().backward()
 
         both = timed(step, args.repeats)
-        print(f"{resolution}x{resolution}, 5 lights, {covered} covered pixels: "
-              f"rasterize {raster[0]:.1f} ms (min {raster[1]:.1f}); forward {forward[0]:.1f} ms "
-              f"(min {forward[1]:.1f}); forward+backward {both[0]:.1f} ms (min {both[1]:.1f})")
+        print(
+            f"{resolution}x{resolution}, 5 lights, {covered} covered pixels: "
+            f"rasterize {raster[0]:.1f} ms (min {raster[1]:.1f}); forward {forward[0]:.1f} ms "
+            f"(min {forward[1]:.1f}); forward+backward {both[0]:.1f} ms (min {both[1]:.1f})"
+        )
         if resolution == 256:
             cpu = timed(step, args.repeats, clock=time.thread_time)
             print(f"    forward+backward CPU time of the calling thread {cpu[0]:.1f} ms (min {cpu[1]:.1f})")

@@ -69,13 +69,33 @@ def _workspace(name: str, shape: tuple, dtype) -> np.ndarray:
     return buffer[:size].reshape(shape)
 
 
-def _pick(kernel):
-    """The serial or the parallel compilation of ``kernel``, following torch's thread count.
+def _thread_setting() -> int | None:
+    value = os.environ.get("DEFACE_RENDER_THREADS", "")
+    return int(value) if value.strip() else None
 
-    With 1 torch thread the serial build runs on the calling thread (no thread pool at all); otherwise
-    numba uses as many threads as torch may.
+
+_threads = _thread_setting()
+
+
+def set_threads(count: int | None) -> None:
+    """Threads of the numba kernels; None (the default) follows ``torch.get_num_threads()``.
+
+    The renderer's time is mostly in these kernels, so e.g. 2 kernel threads with 1 torch thread keep
+    torch's small ops free of thread hand-offs while the pixel passes run on both cores. The environment
+    variable DEFACE_RENDER_THREADS sets the initial value. Results do not depend on it (see above).
     """
-    threads = min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
+    global _threads
+    if count is not None and count < 1:
+        raise ValueError(f"kernels.set_threads: need a count >= 1 or None, got {count}")
+    _threads = count
+
+
+def _pick(kernel):
+    """The serial or the parallel compilation of ``kernel`` for the thread setting (``set_threads``).
+
+    With 1 thread the serial build runs on the calling thread (no thread pool at all).
+    """
+    threads = min(torch.get_num_threads() if _threads is None else _threads, numba.config.NUMBA_NUM_THREADS)
     if threads <= 1:
         return kernel.serial
     numba.set_num_threads(threads)
@@ -152,7 +172,7 @@ def barycentrics_backward(corners_px, depth, centres, grad) -> tuple[torch.Tenso
 
 
 # -- SH band sums ---------------------------------------------------------------------------------
-_SH_CHUNK = 256  # directions per parallel block (each block allocates its own work arrays once)
+_SH_CHUNK = 64  # directions per block: the recurrences run along a block (SIMD); its work arrays stay in L1/L2
 
 
 def sh_constants(diagonal: list[float], rows: list[tuple[list[float], list[float]]]):
@@ -165,15 +185,15 @@ def sh_constants(diagonal: list[float], rows: list[tuple[list[float], list[float
 
 
 def sh_basis_forward(directions: torch.Tensor, constants) -> torch.Tensor:
-    """Real SH basis (sh.py's convention) at unit directions [N, 3] -> [N, B²]."""
+    """Real SH basis (sh.py's convention) at unit directions [N, 3] -> rows [B², N]."""
     dirs = _array(directions)
-    out = np.empty((dirs.shape[0], constants[0].shape[0] ** 2), dtype=dirs.dtype)
+    out = np.empty((constants[0].shape[0] ** 2, dirs.shape[0]), dtype=dirs.dtype)
     _pick(_sh_basis)(dirs, constants, _SH_CHUNK, out)
     return torch.from_numpy(out)
 
 
 def sh_basis_backward(directions: torch.Tensor, grad: torch.Tensor, constants) -> torch.Tensor:
-    """sum_j grad[n, j] dY_j/d(x, y, z)(directions[n]): grad [N, B²] -> [N, 3]."""
+    """sum_j grad[j, n] dY_j/d(x, y, z)(directions[n]): grad [B², N] -> [N, 3]."""
     dirs = _array(directions)
     out = np.empty(dirs.shape, dtype=dirs.dtype)
     _pick(_sh_basis_vjp)(dirs, constants, _array(grad), _SH_CHUNK, out)
@@ -248,7 +268,8 @@ def shade_forward(plain, bands_v, uvs, bary, textures, pixels, size):
     plain [U, 3K+5] per-vertex (irradiance, normal, camera z, visibility), bands_v [U, B, 3K] specular
     band sums, uvs [Nuv, 2], bary [N, 3], textures (diffuse, specular, roughness) [Ht, Wt, C],
     pixels = (flat pixel index [N], vertex corners [N, 3], uv corners [N, 3]), size = (H, W).
-    Returns images [K, H, W, 3] and the six screen buffers [H, W, C] of SCREEN_CHANNELS (0 elsewhere).
+    Returns images [K, H, W, 3] and the six screen buffers [H, W, C] of SCREEN_CHANNELS (0 elsewhere), and
+    the filtered specular radiance per unit k_s [N, 3K] (float64 numpy) that ``shade_backward`` reuses.
     """
     arrays = [_array(t) for t in (plain, bands_v, uvs, bary, *textures)]
     covered, corners, uv_corners = (_array(t) for t in pixels)
@@ -256,16 +277,20 @@ def shade_forward(plain, bands_v, uvs, bary, textures, pixels, size):
     height, width = size
     images = np.zeros((bands_v.shape[2] // 3, height, width, 3), dtype=dtype)
     screens = [np.zeros((height, width, c), dtype=dtype) for c in SCREEN_CHANNELS]
-    _pick(_shade_forward)(*arrays, covered, corners, uv_corners, images, *screens)
+    lit = np.empty((bary.shape[0], bands_v.shape[2]))  # float64, exactly what the images used
+    _pick(_shade_forward)(*arrays, covered, corners, uv_corners, images, *screens, lit)
     screens[2] = screens[2][..., 0]  # depth is [H, W]
-    return [torch.from_numpy(a) for a in (images, *screens)]
+    return [torch.from_numpy(a) for a in (images, *screens)], lit
 
 
-def shade_backward(plain, bands_v, uvs, bary, textures, pixels, width, grads, need_textures):
-    """Gradients of ``shade_forward`` from the output gradients ``grads`` (None where unused).
+def shade_backward(plain, bands_v, uvs, bary, textures, pixels, width, grads, need_textures, lit):
+    """Gradients of ``shade_forward`` from the output gradients ``grads`` (None where unused); ``lit`` is
+    what ``shade_forward`` returned with the images.
 
     Returns (grad plain [U, P], grad bands_v [U, B, 3K], grad bary [N, 3], texture grads (None where
-    ``need_textures`` is False)).
+    ``need_textures`` is False)). The per-vertex gradients are scattered from the pixels in pixel order
+    into _SCATTER_PARTS buffers (one per contiguous range of pixels, summed in order afterwards), so
+    they are the same for any number of threads.
     """
     arrays = [_array(t) for t in (plain, bands_v, uvs, bary, *textures)]
     covered, corners, uv_corners = (_array(t) for t in pixels)
@@ -276,18 +301,13 @@ def shade_backward(plain, bands_v, uvs, bary, textures, pixels, width, grads, ne
         _array(g) if g is not None else np.zeros((1,) * ndim, dtype=dtype)
         for g, ndim in zip(grads, (4, 3, 3, 2, 3, 3, 3), strict=True)
     ]
-    grad_plain = np.empty((num, plain.shape[1]), dtype=dtype)
-    grad_summed = _workspace("shade_grad_summed", (num, bands * channels), dtype)  # [N, B*3K], lobe_l g_lit
+    used = plain.shape[0]
+    grad_plain = np.empty((_SCATTER_PARTS, used, plain.shape[1]), dtype=dtype)
+    grad_bands = np.empty((_SCATTER_PARTS, used, bands * channels), dtype=dtype)
     grad_texels = np.empty((num, 7), dtype=dtype)  # d loss / d (diffuse, specular, roughness) samples
     grad_bary = np.empty((num, 3), dtype=dtype)
-    _pick(_shade_backward)(
-        *arrays, covered, corners, uv_corners, width, given, *outputs, grad_plain, grad_summed, grad_texels, grad_bary
-    )
-    offsets, entries = _corners_by_vertex(corners, plain.shape[0])
-    grad_vertex = np.empty((plain.shape[0], plain.shape[1]), dtype=dtype)
-    _pick(_gather_rows)(offsets, entries, arrays[3], grad_plain, grad_vertex)
-    grad_bands = np.empty((plain.shape[0], bands * channels), dtype=dtype)
-    _pick(_gather_rows)(offsets, entries, arrays[3], grad_summed, grad_bands)
+    scattered = (grad_plain, grad_bands, grad_texels, grad_bary)
+    _pick(_shade_backward)(*arrays, covered, corners, uv_corners, width, given, *outputs, lit, *scattered)
     uv = _shade_uv(arrays[2], arrays[3], uv_corners) if any(need_textures) else None
     texture_grads = []
     for texture, start, need in zip(arrays[4:], (0, 3, 6), need_textures, strict=True):
@@ -296,8 +316,20 @@ def shade_backward(plain, bands_v, uvs, bary, textures, pixels, width, grads, ne
             grad_texture = np.zeros(texture.shape, dtype=dtype)
             _bilinear_scatter(uv, grad_texels[:, start : start + texture.shape[2]], grad_texture)
         texture_grads.append(None if grad_texture is None else torch.from_numpy(grad_texture))
-    grad_bands = grad_bands.reshape(plain.shape[0], bands, channels)
+    grad_vertex, grad_bands = _sum_parts(grad_plain), _sum_parts(grad_bands).reshape(used, bands, channels)
     return torch.from_numpy(grad_vertex), torch.from_numpy(grad_bands), torch.from_numpy(grad_bary), texture_grads
+
+
+_SCATTER_PARTS = 2
+"""Contiguous pixel ranges whose per-vertex gradients are accumulated separately (in parallel on 2 threads)."""
+
+
+def _sum_parts(parts: np.ndarray) -> np.ndarray:
+    """parts [P, ...] summed in index order."""
+    total = parts[0]
+    for part in parts[1:]:
+        total += part
+    return total
 
 
 if numba is not None:
@@ -487,86 +519,89 @@ if numba is not None:
                 grad_p[n, k, 1] += g * edges[j]
 
     @njit(inline="always")
-    def _sh_rows_at(direction, constants, scratch, basis, d_basis, derivative):
-        """Y_j (index l*l+l+m) at one unit direction [3] into ``basis`` [B²], and dY_j/d(x, y, z) into
-        ``d_basis`` [B², 3] if ``derivative``: the recurrences of sh.py (Q_l^m(z) times Re/Im (x+iy)^m)."""
-        x, y, z = direction[0], direction[1], direction[2]
+    def _sh_block_rows(directions, constants, start, size, rows, d_rows, derivative):
+        """Y_j (index l*l+l+m) of directions[start : start + size] into the columns 0..size-1 of ``rows``
+        [B², chunk], and dY_j/d(x, y, z) into ``d_rows`` [3, B², chunk] if ``derivative``: the recurrences of
+        sh.py (Q_l^m(z) times Re/Im (x+iy)^m), each step run along the block of directions (vectorised)."""
         diagonal, a, b = constants
-        q, dq, cos_m, sin_m = scratch
-        bands = diagonal.shape[0]
-        cos_m[0], sin_m[0] = 1.0, 0.0
+        bands, chunk = diagonal.shape[0], rows.shape[1]
+        cos_m, sin_m, z = np.empty((bands, chunk)), np.empty((bands, chunk)), np.empty(chunk)
+        q, dq = np.empty((3, bands, chunk)), np.empty((3, bands, chunk))  # bands l, l-1, l-2 in slots l % 3
+        for k in range(size):
+            z[k] = directions[start + k, 2]
+            cos_m[0, k], sin_m[0, k] = 1.0, 0.0
         for m in range(1, bands):
-            cos_m[m] = cos_m[m - 1] * x - sin_m[m - 1] * y
-            sin_m[m] = sin_m[m - 1] * x + cos_m[m - 1] * y
+            for k in range(size):
+                x, y = directions[start + k, 0], directions[start + k, 1]
+                cos_m[m, k] = cos_m[m - 1, k] * x - sin_m[m - 1, k] * y
+                sin_m[m, k] = sin_m[m - 1, k] * x + cos_m[m - 1, k] * y
         root2 = np.sqrt(2.0)
         for l in range(bands):  # noqa: E741
+            cur, prev, prev2 = q[l % 3], q[(l + 2) % 3], q[(l + 1) % 3]
+            d_cur, d_prev, d_prev2 = dq[l % 3], dq[(l + 2) % 3], dq[(l + 1) % 3]
             for m in range(l - 1):
-                q[l, m] = a[l, m] * (z * q[l - 1, m] - b[l, m] * q[l - 2, m])
+                a_lm, b_lm = a[l, m], b[l, m]
+                for k in range(size):
+                    cur[m, k] = a_lm * (z[k] * prev[m, k] - b_lm * prev2[m, k])
                 if derivative:
-                    dq[l, m] = a[l, m] * (q[l - 1, m] + z * dq[l - 1, m] - b[l, m] * dq[l - 2, m])
+                    for k in range(size):
+                        d_cur[m, k] = a_lm * (prev[m, k] + z[k] * d_prev[m, k] - b_lm * d_prev2[m, k])
             if l >= 1:
-                q[l, l - 1] = np.sqrt(2.0 * l + 1.0) * z * q[l - 1, l - 1]
-                dq[l, l - 1] = np.sqrt(2.0 * l + 1.0) * q[l - 1, l - 1]
-            q[l, l] = diagonal[l]
-            dq[l, l] = 0.0
+                root = np.sqrt(2.0 * l + 1.0)
+                for k in range(size):
+                    cur[l - 1, k] = root * z[k] * prev[l - 1, k]
+                    d_cur[l - 1, k] = root * prev[l - 1, k]  # Q_{l-1}^{l-1} is constant
+            for k in range(size):
+                cur[l, k], d_cur[l, k] = diagonal[l], 0.0
             centre = l * l + l
-            basis[centre] = q[l, 0]
+            for k in range(size):
+                rows[centre, k] = cur[0, k]
             if derivative:
-                d_basis[centre, 0], d_basis[centre, 1], d_basis[centre, 2] = 0.0, 0.0, dq[l, 0]
+                for k in range(size):
+                    d_rows[0, centre, k], d_rows[1, centre, k], d_rows[2, centre, k] = 0.0, 0.0, d_cur[0, k]
             for m in range(1, l + 1):
-                basis[centre + m] = root2 * q[l, m] * cos_m[m]
-                basis[centre - m] = root2 * q[l, m] * sin_m[m]
+                for k in range(size):
+                    rows[centre + m, k] = root2 * cur[m, k] * cos_m[m, k]
+                    rows[centre - m, k] = root2 * cur[m, k] * sin_m[m, k]
                 if derivative:
-                    mq = root2 * m * q[l, m]
-                    d_basis[centre + m, 0] = mq * cos_m[m - 1]
-                    d_basis[centre + m, 1] = -mq * sin_m[m - 1]
-                    d_basis[centre + m, 2] = root2 * dq[l, m] * cos_m[m]
-                    d_basis[centre - m, 0] = mq * sin_m[m - 1]
-                    d_basis[centre - m, 1] = mq * cos_m[m - 1]
-                    d_basis[centre - m, 2] = root2 * dq[l, m] * sin_m[m]
-
-    @njit(inline="always")
-    def _sh_scratch(bands):
-        """Per-thread work arrays of ``_sh_rows_at``: Q, dQ/dz [B, B], Re/Im (x+iy)^m [B]."""
-        return np.empty((bands, bands)), np.empty((bands, bands)), np.empty(bands), np.empty(bands)
+                    for k in range(size):
+                        mq = root2 * m * cur[m, k]
+                        d_rows[0, centre + m, k] = mq * cos_m[m - 1, k]
+                        d_rows[1, centre + m, k] = -mq * sin_m[m - 1, k]
+                        d_rows[2, centre + m, k] = root2 * d_cur[m, k] * cos_m[m, k]
+                        d_rows[0, centre - m, k] = mq * sin_m[m - 1, k]
+                        d_rows[1, centre - m, k] = mq * cos_m[m - 1, k]
+                        d_rows[2, centre - m, k] = root2 * d_cur[m, k] * sin_m[m, k]
 
     @_serial_and_parallel
     def _sh_basis(directions, constants, chunk, out):
         bands = constants[0].shape[0]
         count = directions.shape[0]
         for block in prange((count + chunk - 1) // chunk):
-            scratch = _sh_scratch(bands)
-            for n in range(block * chunk, min(count, (block + 1) * chunk)):
-                _sh_rows_at(directions[n], constants, scratch, out[n], out[n], False)
+            start = block * chunk
+            size = min(count, start + chunk) - start
+            rows = np.empty((bands * bands, chunk))
+            _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
+            for j in range(bands * bands):
+                for k in range(size):
+                    out[j, start + k] = rows[j, k]
 
     @_serial_and_parallel
     def _sh_basis_vjp(directions, constants, grad, chunk, out):
         bands = constants[0].shape[0]
         count = directions.shape[0]
         for block in prange((count + chunk - 1) // chunk):
-            scratch, basis = _sh_scratch(bands), np.empty(bands * bands)
-            d_basis = np.empty((bands * bands, 3))
-            for n in range(block * chunk, min(count, (block + 1) * chunk)):
-                _sh_rows_at(directions[n], constants, scratch, basis, d_basis, True)
-                gx, gy, gz = 0.0, 0.0, 0.0
-                for j in range(bands * bands):
-                    gx += grad[n, j] * d_basis[j, 0]
-                    gy += grad[n, j] * d_basis[j, 1]
-                    gz += grad[n, j] * d_basis[j, 2]
-                out[n, 0], out[n, 1], out[n, 2] = gx, gy, gz
-
-    @njit(inline="always")
-    def _sh_block_rows(directions, constants, start, size, rows, d_rows, derivative):
-        """Basis of directions[start : start + size] as columns of ``rows`` [B², chunk] (and the
-        derivatives into ``d_rows`` [3, B², chunk]): later loops then run along the block, vectorised."""
-        bands = constants[0].shape[0]
-        scratch, basis, d_basis = _sh_scratch(bands), np.empty(bands * bands), np.empty((bands * bands, 3))
-        for k in range(size):
-            _sh_rows_at(directions[start + k], constants, scratch, basis, d_basis, derivative)
+            start = block * chunk
+            size = min(count, start + chunk) - start
+            rows, d_rows = np.empty((bands * bands, chunk)), np.empty((3, bands * bands, chunk))
+            _sh_block_rows(directions, constants, start, size, rows, d_rows, True)
+            totals = np.zeros((3, chunk))
             for j in range(bands * bands):
-                rows[j, k] = basis[j]
-                if derivative:
-                    d_rows[0, j, k], d_rows[1, j, k], d_rows[2, j, k] = d_basis[j, 0], d_basis[j, 1], d_basis[j, 2]
+                for axis in range(3):
+                    for k in range(size):
+                        totals[axis, k] += grad[j, start + k] * d_rows[axis, j, k]
+            for k in range(size):
+                out[start + k, 0], out[start + k, 1], out[start + k, 2] = totals[0, k], totals[1, k], totals[2, k]
 
     @_serial_and_parallel
     def _sh_band_sums(directions, coeffs, constants, chunk, out):
@@ -725,6 +760,7 @@ if numba is not None:
         diffuse_out,
         specular_out,
         roughness_out,
+        lit_out,
     ):
         num_channels, bands = bands_v.shape[2], bands_v.shape[1]
         lights = num_channels // 3
@@ -739,6 +775,7 @@ if numba is not None:
                     plain, flat_bands, uvs, bary, roughness_map, p, corners, uv_corners, values, summed, lobe, lit
                 )
                 visibility = values[num_channels + 4]
+                lit_out[p, :] = lit
                 for c in range(3):
                     d = _bilinear_sample(diffuse_map, x0, x1, fx, y0, y1, fy, c)
                     s = _bilinear_sample(specular_map, x0, x1, fx, y0, y1, fy, c)
@@ -777,22 +814,35 @@ if numba is not None:
         g_diffuse,
         g_specular,
         g_roughness,
+        lit_saved,
         grad_plain,
-        grad_summed,
+        grad_bands,
         grad_texels,
         grad_bary,
     ):
+        """One pass over the pixels; scatters the vertex gradients into grad_plain / grad_bands [parts, U, .]
+        (part k holds the k-th contiguous range of pixels, accumulated in pixel order)."""
         num_channels, bands = bands_v.shape[2], bands_v.shape[1]
-        lights = num_channels // 3
-        flat_bands = bands_v.reshape(bands_v.shape[0], bands * num_channels)
-        for block in prange((bary.shape[0] + 255) // 256):
-            values, summed = np.empty(plain.shape[1], dtype=plain.dtype), np.empty(bands * num_channels)
-            lobe, lit, g_lit = np.empty(bands), np.empty(num_channels), np.empty(num_channels)
-            for p in range(block * 256, min(bary.shape[0], (block + 1) * 256)):
+        lights, row = num_channels // 3, bands * num_channels
+        flat_bands = bands_v.reshape(bands_v.shape[0], row)
+        parts, num = grad_plain.shape[0], bary.shape[0]
+        for part in prange(parts):
+            grad_plain[part] = 0.0
+            grad_bands[part] = 0.0
+            values, g_values = np.empty(plain.shape[1]), np.empty(plain.shape[1])
+            lobe, g_lit = np.empty(bands), np.empty(num_channels)
+            # d loss / d summed[l*C + j] = lobe_l g_lit_j, and the same times l² (for d lobe / d exponent)
+            g_summed, g_summed_l2 = np.empty(row), np.empty(row)
+            spec_bary = np.empty(3)  # d loss / d bary through the specular band sums
+            for p in range(part * num // parts, (part + 1) * num // parts):
                 y, x = covered[p] // width, covered[p] % width
-                _, _, x0, x1, fx, slope_x, y0, y1, fy, slope_y, _, exponent, d_exponent = _pixel_inputs(
-                    plain, flat_bands, uvs, bary, roughness_map, p, corners, uv_corners, values, summed, lobe, lit
+                _interpolate_row(plain, corners, bary, p, values)
+                u, v = _uv_at(uvs, bary, uv_corners, p)
+                x0, x1, fx, slope_x, y0, y1, fy, slope_y = _bilinear_setup(
+                    u, v, roughness_map.shape[0], roughness_map.shape[1]
                 )
+                roughness = _bilinear_sample(roughness_map, x0, x1, fx, y0, y1, fy, 0)
+                exponent, d_exponent = _phong_lobe(roughness, lobe)
                 visibility = values[num_channels + 4]
                 g_visibility = 0.0
                 d_fx, d_fy = 0.0, 0.0  # d loss / d bilinear fractions, summed over the three maps
@@ -804,11 +854,11 @@ if numba is not None:
                     for k in range(lights):
                         j = 3 * k + c
                         g = g_images[k, y, x, c] if given[0] else 0.0
-                        grad_plain[p, j] = g * d / np.pi
+                        g_values[j] = g * d / np.pi
                         g_d += g * values[j] / np.pi
                         g_lit[j] = g * visibility * s
-                        g_visibility += g * lit[j] * s
-                        g_s += g * lit[j] * visibility
+                        g_visibility += g * lit_saved[p, j] * s
+                        g_s += g * lit_saved[p, j] * visibility
                     grad_texels[p, c], grad_texels[p, 3 + c] = g_d, g_s
                     t00, t01, t10, t11 = _texel_corners(diffuse_map, x0, x1, y0, y1, c)
                     d_fx += g_d * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
@@ -816,21 +866,10 @@ if numba is not None:
                     t00, t01, t10, t11 = _texel_corners(specular_map, x0, x1, y0, y1, c)
                     d_fx += g_s * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
                     d_fy += g_s * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
-                # lobe_l = exp(-l² / (2 s)): d lobe_l / d s = lobe_l l² / (2 s²)
-                g_exponent = 0.0
                 for l in range(bands):  # noqa: E741
-                    g_lobe = 0.0
                     for j in range(num_channels):
-                        g_lobe += g_lit[j] * summed[l * num_channels + j]
-                        grad_summed[p, l * num_channels + j] = lobe[l] * g_lit[j]
-                    g_exponent += g_lobe * lobe[l] * (l * l) / (2.0 * exponent * exponent)
-                g_r = g_exponent * d_exponent + (g_roughness[y, x, 0] if given[6] else 0.0)
-                grad_texels[p, 6] = g_r
-                t00, t01, t10, t11 = _texel_corners(roughness_map, x0, x1, y0, y1, 0)
-                d_fx += g_r * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
-                d_fy += g_r * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
-                g_u = d_fx * slope_x + (g_uv[y, x, 0] if given[1] else 0.0)
-                g_v = -d_fy * slope_y + (g_uv[y, x, 1] if given[1] else 0.0)
+                        g_summed[l * num_channels + j] = lobe[l] * g_lit[j]
+                        g_summed_l2[l * num_channels + j] = lobe[l] * g_lit[j] * (l * l)
                 # normals: n / max(|n|, 1e-12)
                 norm = np.sqrt(
                     values[num_channels] ** 2 + values[num_channels + 1] ** 2 + values[num_channels + 2] ** 2
@@ -839,37 +878,45 @@ if numba is not None:
                 dot = 0.0
                 for a in range(3):
                     g_n = g_normal[y, x, a] if given[2] else 0.0
-                    grad_plain[p, num_channels + a] = g_n / clamped
+                    g_values[num_channels + a] = g_n / clamped
                     dot += g_n * values[num_channels + a]
                 if norm >= 1e-12:
                     for a in range(3):
-                        grad_plain[p, num_channels + a] -= dot / (clamped * clamped) * values[num_channels + a] / norm
-                grad_plain[p, num_channels + 3] = g_depth[y, x] if given[3] else 0.0
-                grad_plain[p, num_channels + 4] = g_visibility
+                        g_values[num_channels + a] -= dot / (clamped * clamped) * values[num_channels + a] / norm
+                g_values[num_channels + 3] = g_depth[y, x] if given[3] else 0.0
+                g_values[num_channels + 4] = g_visibility
+                # lobe_l = exp(-l² / (2 s)): d lobe_l / d s = lobe_l l² / (2 s²); the band sums are interpolated,
+                # so d loss / d s = sum_i bary_i sum_lj S[corner_i, lj] lobe_l l² g_lit_j / (2 s²)
+                g_exponent = 0.0
                 for i in range(3):
-                    total = g_u * uvs[uv_corners[p, i], 0] + g_v * uvs[uv_corners[p, i], 1]
                     vertex = corners[p, i]
+                    to_bary, to_exponent = 0.0, 0.0
+                    for k in range(row):
+                        to_bary += flat_bands[vertex, k] * g_summed[k]
+                        to_exponent += flat_bands[vertex, k] * g_summed_l2[k]
+                    spec_bary[i] = to_bary
+                    g_exponent += bary[p, i] * to_exponent
+                g_r = g_exponent / (2.0 * exponent * exponent) * d_exponent
+                g_r += g_roughness[y, x, 0] if given[6] else 0.0
+                grad_texels[p, 6] = g_r
+                t00, t01, t10, t11 = _texel_corners(roughness_map, x0, x1, y0, y1, 0)
+                d_fx += g_r * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
+                d_fy += g_r * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
+                g_u = d_fx * slope_x + (g_uv[y, x, 0] if given[1] else 0.0)
+                g_v = -d_fy * slope_y + (g_uv[y, x, 1] if given[1] else 0.0)
+                for i in range(3):
+                    vertex, weight = corners[p, i], bary[p, i]
+                    total = g_u * uvs[uv_corners[p, i], 0] + g_v * uvs[uv_corners[p, i], 1] + spec_bary[i]
                     for c in range(plain.shape[1]):
-                        total += plain[vertex, c] * grad_plain[p, c]
-                    for j in range(bands * num_channels):
-                        total += flat_bands[vertex, j] * grad_summed[p, j]
+                        total += plain[vertex, c] * g_values[c]
+                        grad_plain[part, vertex, c] += weight * g_values[c]
+                    for k in range(row):
+                        grad_bands[part, vertex, k] += weight * g_summed[k]
                     grad_bary[p, i] = total
 
     @njit(inline="always")
     def _texel_corners(texture, x0, x1, y0, y1, c):
         return texture[y0, x0, c], texture[y0, x1, c], texture[y1, x0, c], texture[y1, x1, c]
-
-    @_serial_and_parallel
-    def _gather_rows(offsets, slots, bary, grad, out):
-        """out[v] = sum over the corner slots of v of bary[p, i] grad[p] (rows [N, C] -> [U, C])."""
-        for v in prange(out.shape[0]):
-            for c in range(out.shape[1]):
-                out[v, c] = 0.0
-            for k in range(offsets[v], offsets[v + 1]):
-                p, i = slots[k] // 3, slots[k] % 3
-                weight = bary[p, i]
-                for c in range(out.shape[1]):
-                    out[v, c] += weight * grad[p, c]
 
     @njit(inline="always")
     def _face_cross(vertices, triangles, f):

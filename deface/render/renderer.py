@@ -398,7 +398,7 @@ def _radiance(irradiance, diffuse, lit, visibility, specular) -> torch.Tensor:
 class _KernelShade(torch.autograd.Function):
     """The numba path of ``Renderer.shade``'s pixel stage, fused: per covered pixel it interpolates the
     per-vertex values, looks up the three maps, applies the Phong filter and writes every screen buffer;
-    the backward is one pass over the pixels plus the per-vertex gathers (kernels.shade_backward).
+    the backward is one pass over the pixels that also scatters the per-vertex gradients (kernels.shade_backward).
 
     Inputs: plain [U, K*3 + 5] (irradiance, normal, camera z, visibility per used vertex), bands_v
     [U, B, K*3], uvs [Nuv, 2], bary [N, 3], the diffuse / specular / roughness maps; pixels = (covered
@@ -410,14 +410,16 @@ class _KernelShade(torch.autograd.Function):
     def forward(ctx, plain, bands_v, uvs, bary, diffuse, specular, roughness, pixels, size):
         ctx.set_materialize_grads(False)
         ctx.save_for_backward(plain, bands_v, uvs, bary, diffuse, specular, roughness)
+        maps = (diffuse, specular, roughness)
+        outputs, ctx.lit = kernels.shade_forward(plain, bands_v, uvs, bary, maps, pixels, size)
         ctx.pixels, ctx.width = pixels, size[1]
-        return tuple(kernels.shade_forward(plain, bands_v, uvs, bary, (diffuse, specular, roughness), pixels, size))
+        return tuple(outputs)
 
     @staticmethod
     def backward(ctx, *grads):
         plain, bands_v, uvs, bary, *maps = ctx.saved_tensors
         grad_plain, grad_bands, grad_bary, grad_maps = kernels.shade_backward(
-            plain, bands_v, uvs, bary, maps, ctx.pixels, ctx.width, grads, ctx.needs_input_grad[4:7]
+            plain, bands_v, uvs, bary, maps, ctx.pixels, ctx.width, grads, ctx.needs_input_grad[4:7], ctx.lit
         )
         return grad_plain, grad_bands, None, grad_bary, *grad_maps, None, None
 

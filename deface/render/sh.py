@@ -118,14 +118,14 @@ class _SHBasis(torch.autograd.Function):
         ctx.bands = bands
         ctx.save_for_backward(directions)
         if kernels.enabled(directions):  # the same recurrences, one loop per direction
-            return kernels.sh_basis_forward(directions, _kernel_constants(bands)).T
+            return kernels.sh_basis_forward(directions, _kernel_constants(bands))
         return _sh_rows_forward(directions, bands)
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):
         (directions,) = ctx.saved_tensors
         if kernels.enabled(directions, grad):
-            return kernels.sh_basis_backward(directions, grad.T, _kernel_constants(ctx.bands)), None
+            return kernels.sh_basis_backward(directions, grad, _kernel_constants(ctx.bands)), None
         return _sh_rows_vjp(directions, grad, ctx.bands), None
 
 
