@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import torch
 
+from deface.decouple.ace import light_areas
 from deface.fit.config import FitConfig
 from deface.fit.decoupling import Decoupling
 from deface.fit.scene import SceneParameters, frame_geometry
@@ -160,5 +161,9 @@ def _apply_ace(context: StageContext) -> None:
         coverage = context.renderer.rasterize(geometry.mesh, geometry.camera).mask
         masks.append(context.decoupling.light_masks(frame, coverage))
         coverages.append(coverage)
-    kept = context.decoupling.run_ace(torch.stack(masks), torch.stack(coverages))
-    context.log.info(f"ACE kept {len(kept)} of {context.scene.lights.shape[0]} lights: {kept}")
+    masks, coverages = torch.stack(masks), torch.stack(coverages)
+    areas = light_areas(masks, coverages, context.config.decouple.area_normaliser)
+    kept = context.decoupling.run_ace(masks, coverages)
+    shown = ", ".join(f"{float(area):.2f}" for area in areas)
+    context.log.info(f"ACE kept {len(kept)} of {len(areas)} lights: {kept} (mask areas {shown}, "
+                     f"eps {context.config.decouple.epsilon})")
