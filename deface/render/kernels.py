@@ -154,21 +154,25 @@ def bilinear_backward(texture: torch.Tensor, uv: torch.Tensor, grad: torch.Tenso
 
 
 # -- perspective-correct barycentrics ---------------------------------------------------------------
-def barycentrics_forward(corners_px: torch.Tensor, depth: torch.Tensor, centres: torch.Tensor) -> torch.Tensor:
-    """Barycentrics [N, 3] of pixel centres [N, 2] in triangles with projected corners [N, 3, 2] and
-    camera depths [N, 3] (renderer._barycentrics' formula)."""
-    p = _array(corners_px)
-    out = np.empty((p.shape[0], 3), dtype=p.dtype)
-    _pick(_barycentrics_forward)(p, _array(depth), _array(centres), np.finfo(p.dtype).tiny, out)
+def barycentrics_forward(pixels, depth, corners, centres) -> torch.Tensor:
+    """Barycentrics [N, 3] of pixel centres [N, 2] in triangles ``corners`` [N, 3] of the vertices projected
+    to ``pixels`` [V, 2] with camera depths ``depth`` [V] (renderer._barycentrics' formula)."""
+    p = _array(pixels)
+    out = np.empty((centres.shape[0], 3), dtype=p.dtype)
+    _pick(_barycentrics_forward)(p, _array(depth), _array(corners), _array(centres), np.finfo(p.dtype).tiny, out)
     return torch.from_numpy(out)
 
 
-def barycentrics_backward(corners_px, depth, centres, grad) -> tuple[torch.Tensor, torch.Tensor]:
-    """Gradients of ``barycentrics_forward`` to the projected corners [N, 3, 2] and depths [N, 3]."""
-    p, z = _array(corners_px), _array(depth)
-    grad_p, grad_z = np.empty(p.shape, dtype=p.dtype), np.empty(z.shape, dtype=z.dtype)
-    _pick(_barycentrics_backward)(p, z, _array(centres), np.finfo(p.dtype).tiny, _array(grad), grad_p, grad_z)
-    return torch.from_numpy(grad_p), torch.from_numpy(grad_z)
+def barycentrics_backward(pixels, depth, corners, centres, grad) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gradients of ``barycentrics_forward`` to the projected vertices [V, 2] and their depths [V].
+
+    Per-pixel gradients first (in parallel), then one serial scatter in pixel order (deterministic)."""
+    p, z, tri = _array(pixels), _array(depth), _array(corners)
+    grad_p, grad_z = np.empty((tri.shape[0], 3, 2), dtype=p.dtype), np.empty(tri.shape, dtype=z.dtype)
+    _pick(_barycentrics_backward)(p, z, tri, _array(centres), np.finfo(p.dtype).tiny, _array(grad), grad_p, grad_z)
+    grad_pixels, grad_depth = np.zeros(p.shape, dtype=p.dtype), np.zeros(z.shape, dtype=z.dtype)
+    _scatter_corners(tri, grad_p, grad_z, grad_pixels, grad_depth)
+    return torch.from_numpy(grad_pixels), torch.from_numpy(grad_depth)
 
 
 # -- SH band sums ---------------------------------------------------------------------------------
@@ -467,56 +471,69 @@ if numba is not None:
             grad_uv[p, 1] = -d_fy * slope_y  # y = (1 - v) * Ht - 0.5
 
     @njit(inline="always")
-    def _edge_functions(p, q, n):
-        """Corner offsets d_i = p[n, i] - q[n] and s_i = cross(d_{i+1}, d_{i+2}) (~2 x sub-areas), as one flat
-        tuple (d0x, d1x, d2x, d0y, d1y, d2y, s0, s1, s2): scalars only, no per-pixel arrays."""
+    def _edge_functions(p, tri, q, n):
+        """Corner offsets d_i = p[tri[n, i]] - q[n] and s_i = cross(d_{i+1}, d_{i+2}) (~2 x sub-areas), as one
+        flat tuple (d0x, d1x, d2x, d0y, d1y, d2y, s0, s1, s2): scalars only, no per-pixel arrays."""
         qx, qy = q[n, 0], q[n, 1]
-        d0x, d1x, d2x = p[n, 0, 0] - qx, p[n, 1, 0] - qx, p[n, 2, 0] - qx
-        d0y, d1y, d2y = p[n, 0, 1] - qy, p[n, 1, 1] - qy, p[n, 2, 1] - qy
+        i0, i1, i2 = tri[n, 0], tri[n, 1], tri[n, 2]
+        d0x, d1x, d2x = p[i0, 0] - qx, p[i1, 0] - qx, p[i2, 0] - qx
+        d0y, d1y, d2y = p[i0, 1] - qy, p[i1, 1] - qy, p[i2, 1] - qy
         return (
             d0x, d1x, d2x, d0y, d1y, d2y, d1x * d2y - d1y * d2x, d2x * d0y - d2y * d0x, d0x * d1y - d0y * d1x
         )  # fmt: skip
 
     @_serial_and_parallel
-    def _barycentrics_forward(corners_px, depth, centres, tiny, out):
+    def _barycentrics_forward(pixels, depth, tri, centres, tiny, out):
         for n in prange(out.shape[0]):
-            edges = _edge_functions(corners_px, centres, n)
+            edges = _edge_functions(pixels, tri, centres, n)
             area = edges[6] + edges[7] + edges[8]
             if abs(area) < tiny:
                 area = tiny
-            w0 = edges[6] / area / depth[n, 0]
-            w1 = edges[7] / area / depth[n, 1]
-            w2 = edges[8] / area / depth[n, 2]
+            w0 = edges[6] / area / depth[tri[n, 0]]
+            w1 = edges[7] / area / depth[tri[n, 1]]
+            w2 = edges[8] / area / depth[tri[n, 2]]
             total = w0 + w1 + w2
             out[n, 0], out[n, 1], out[n, 2] = w0 / total, w1 / total, w2 / total
 
     @_serial_and_parallel
-    def _barycentrics_backward(corners_px, depth, centres, tiny, grad, grad_p, grad_z):
+    def _barycentrics_backward(pixels, depth, tri, centres, tiny, grad, grad_p, grad_z):
+        """Gradients to each pixel's corners: grad_p [N, 3, 2], grad_z [N, 3]."""
         for n in prange(grad.shape[0]):
-            edges = _edge_functions(corners_px, centres, n)
+            edges = _edge_functions(pixels, tri, centres, n)
+            z0, z1, z2 = depth[tri[n, 0]], depth[tri[n, 1]], depth[tri[n, 2]]
             area = edges[6] + edges[7] + edges[8]
             degenerate = abs(area) < tiny
             if degenerate:
                 area = tiny
-            w0, w1, w2 = edges[6] / area / depth[n, 0], edges[7] / area / depth[n, 1], edges[8] / area / depth[n, 2]
+            w0, w1, w2 = edges[6] / area / z0, edges[7] / area / z1, edges[8] / area / z2
             total = w0 + w1 + w2
             mean = (grad[n, 0] * w0 + grad[n, 1] * w1 + grad[n, 2] * w2) / total
             grad_area = 0.0
             for i in range(3):
+                z_i = depth[tri[n, i]]
                 h = (grad[n, i] - mean) / total  # d loss / d w_i
-                w = edges[6 + i] / area / depth[n, i]
-                grad_z[n, i] = -h * w / depth[n, i]
+                w = edges[6 + i] / area / z_i
+                grad_z[n, i] = -h * w / z_i
                 grad_area -= h * w / area
                 grad_p[n, i, 0], grad_p[n, i, 1] = 0.0, 0.0
             if degenerate:
                 grad_area = 0.0
             for i in range(3):  # s_i = d_j.x d_k.y - d_j.y d_k.x
                 j, k = (i + 1) % 3, (i + 2) % 3
-                g = ((grad[n, i] - mean) / total) / area / depth[n, i] + grad_area
+                g = ((grad[n, i] - mean) / total) / area / depth[tri[n, i]] + grad_area
                 grad_p[n, j, 0] += g * edges[3 + k]
                 grad_p[n, j, 1] -= g * edges[k]
                 grad_p[n, k, 0] -= g * edges[3 + j]
                 grad_p[n, k, 1] += g * edges[j]
+
+    @njit(cache=True)
+    def _scatter_corners(tri, grad_p, grad_z, grad_pixels, grad_depth):
+        for n in range(tri.shape[0]):  # serial, pixel order: vertices are shared between pixels
+            for i in range(3):
+                v = tri[n, i]
+                grad_pixels[v, 0] += grad_p[n, i, 0]
+                grad_pixels[v, 1] += grad_p[n, i, 1]
+                grad_depth[v] += grad_z[n, i]
 
     @njit(inline="always")
     def _sh_block_rows(directions, constants, start, size, rows, d_rows, derivative):
@@ -669,9 +686,21 @@ if numba is not None:
 
     @njit(inline="always")
     def _bilinear_sample(texture, x0, x1, fx, y0, y1, fy, c):
-        top = texture[y0, x0, c] * (1.0 - fx) + texture[y0, x1, c] * fx
-        bottom = texture[y1, x0, c] * (1.0 - fx) + texture[y1, x1, c] * fx
+        return _bilinear_mix(_texel_corners(texture, x0, x1, y0, y1, c), fx, fy)
+
+    @njit(inline="always")
+    def _bilinear_mix(texels, fx, fy):
+        """Bilinear blend of the texels (t00, t01, t10, t11) at (y0, x0), (y0, x1), (y1, x0), (y1, x1)."""
+        t00, t01, t10, t11 = texels
+        top = t00 * (1.0 - fx) + t01 * fx
+        bottom = t10 * (1.0 - fx) + t11 * fx
         return top * (1.0 - fy) + bottom * fy
+
+    @njit(inline="always")
+    def _bilinear_slopes(texels, fx, fy):
+        """d blend / d fx and d blend / d fy of ``_bilinear_mix``."""
+        t00, t01, t10, t11 = texels
+        return (t01 - t00) * (1.0 - fy) + (t11 - t10) * fy, (t10 - t00) * (1.0 - fx) + (t11 - t01) * fx
 
     @njit(cache=True)
     def _shade_uv(uvs, bary, uv_corners):
@@ -847,25 +876,26 @@ if numba is not None:
                 g_visibility = 0.0
                 d_fx, d_fy = 0.0, 0.0  # d loss / d bilinear fractions, summed over the three maps
                 for c in range(3):
-                    d = _bilinear_sample(diffuse_map, x0, x1, fx, y0, y1, fy, c)
-                    s = _bilinear_sample(specular_map, x0, x1, fx, y0, y1, fy, c)
-                    g_d = g_diffuse[y, x, c] if given[4] else 0.0
+                    diffuse_texels = _texel_corners(diffuse_map, x0, x1, y0, y1, c)
+                    specular_texels = _texel_corners(specular_map, x0, x1, y0, y1, c)
+                    d_over_pi = _bilinear_mix(diffuse_texels, fx, fy) / np.pi
+                    s = _bilinear_mix(specular_texels, fx, fy)
+                    g_irradiance = 0.0  # sum_k g * irradiance_k, times 1/pi below (one division per channel)
                     g_s = g_specular[y, x, c] if given[5] else 0.0
                     for k in range(lights):
                         j = 3 * k + c
                         g = g_images[k, y, x, c] if given[0] else 0.0
-                        g_values[j] = g * d / np.pi
-                        g_d += g * values[j] / np.pi
+                        g_values[j] = g * d_over_pi
+                        g_irradiance += g * values[j]
                         g_lit[j] = g * visibility * s
                         g_visibility += g * lit_saved[p, j] * s
                         g_s += g * lit_saved[p, j] * visibility
+                    g_d = g_irradiance / np.pi + (g_diffuse[y, x, c] if given[4] else 0.0)
                     grad_texels[p, c], grad_texels[p, 3 + c] = g_d, g_s
-                    t00, t01, t10, t11 = _texel_corners(diffuse_map, x0, x1, y0, y1, c)
-                    d_fx += g_d * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
-                    d_fy += g_d * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
-                    t00, t01, t10, t11 = _texel_corners(specular_map, x0, x1, y0, y1, c)
-                    d_fx += g_s * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
-                    d_fy += g_s * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
+                    slope_fx, slope_fy = _bilinear_slopes(diffuse_texels, fx, fy)
+                    d_fx, d_fy = d_fx + g_d * slope_fx, d_fy + g_d * slope_fy
+                    slope_fx, slope_fy = _bilinear_slopes(specular_texels, fx, fy)
+                    d_fx, d_fy = d_fx + g_s * slope_fx, d_fy + g_s * slope_fy
                 for l in range(bands):  # noqa: E741
                     for j in range(num_channels):
                         g_summed[l * num_channels + j] = lobe[l] * g_lit[j]
@@ -899,9 +929,8 @@ if numba is not None:
                 g_r = g_exponent / (2.0 * exponent * exponent) * d_exponent
                 g_r += g_roughness[y, x, 0] if given[6] else 0.0
                 grad_texels[p, 6] = g_r
-                t00, t01, t10, t11 = _texel_corners(roughness_map, x0, x1, y0, y1, 0)
-                d_fx += g_r * ((t01 - t00) * (1.0 - fy) + (t11 - t10) * fy)
-                d_fy += g_r * ((t10 - t00) * (1.0 - fx) + (t11 - t01) * fx)
+                slope_fx, slope_fy = _bilinear_slopes(_texel_corners(roughness_map, x0, x1, y0, y1, 0), fx, fy)
+                d_fx, d_fy = d_fx + g_r * slope_fx, d_fy + g_r * slope_fy
                 g_u = d_fx * slope_x + (g_uv[y, x, 0] if given[1] else 0.0)
                 g_v = -d_fy * slope_y + (g_uv[y, x, 1] if given[1] else 0.0)
                 for i in range(3):

@@ -36,6 +36,10 @@ class Mesh:
             raise ValueError("Mesh: triangle_uvs must have the same shape as triangles")
         if self.uvs.ndim != 2 or self.uvs.shape[1] != 2:
             raise ValueError(f"Mesh: uvs must be [U, 2], got {tuple(self.uvs.shape)}")
+        # row-major index tensors: column-major ones (e.g. from a transposed numpy array) made every gather of
+        # triangle corners and every hand-over to the kernels a strided copy
+        for name in ("triangles", "triangle_uvs"):
+            object.__setattr__(self, name, getattr(self, name).contiguous())
 
     @staticmethod
     def create(vertices, triangles, uvs, triangle_uvs, dtype: torch.dtype = torch.float32) -> Mesh:

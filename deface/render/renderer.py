@@ -59,6 +59,7 @@ class Fragments:
     mask: torch.Tensor  # [H, W] float, 1 where a triangle covers the pixel centre
     covered: torch.Tensor  # [N] long, flat indices (y * W + x) of the covered pixels
     covered_barycentrics: torch.Tensor  # [N, 3] barycentrics of the covered pixels (same graph)
+    covered_triangles: torch.Tensor  # [N] long, triangle id of each covered pixel
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,8 @@ class Renderer:
         tid = triangle_id.to(device=device, dtype=torch.long)
         flat = tid.reshape(-1)
         covered = torch.nonzero(flat >= 0)[:, 0]  # [N]
-        bary = _barycentrics(mesh, camera, flat[covered], covered)  # [N, 3]
+        triangles = flat.index_select(0, covered)  # [N]
+        bary = _barycentrics(mesh, camera, triangles, covered)  # [N, 3]
         full = torch.zeros(height * width, 3, dtype=dtype, device=device).index_copy(0, covered, bary)
         return Fragments(
             triangle_id=tid,
@@ -131,6 +133,7 @@ class Renderer:
             mask=(tid >= 0).to(dtype),
             covered=covered,
             covered_barycentrics=bary,
+            covered_triangles=triangles,
         )
 
     def _cast_primary(self, mesh: Mesh, camera: Camera) -> np.ndarray:
@@ -191,7 +194,7 @@ class Renderer:
         num_lights = sh_lights.shape[0]
         height, width = camera.height, camera.width
         covered, bary = fragments.covered, fragments.covered_barycentrics  # [N], [N, 3]
-        corners = mesh.triangles[fragments.triangle_id.reshape(-1)[covered]]  # [N, 3]
+        corners = mesh.triangles.index_select(0, fragments.covered_triangles)  # [N, 3]
         dtype = sh_lights.dtype
         coeffs = sh_lights.permute(1, 0, 2).reshape(bands * bands, num_lights * 3)  # [B², K*3]
 
@@ -200,7 +203,7 @@ class Renderer:
         normals_v = mesh.vertex_normals().index_select(0, used).to(dtype)  # [U, 3]
         irradiance_v = _vertex_irradiance(normals_v, coeffs, bands, transfer, used)  # [U, K*3]
 
-        uv_corners = mesh.triangle_uvs[fragments.triangle_id.reshape(-1)[covered]]  # [N, 3]
+        uv_corners = mesh.triangle_uvs.index_select(0, fragments.covered_triangles)  # [N, 3]
         camera_z = camera.to_camera(mesh.vertices.index_select(0, used))[:, 2:]  # [U, 1]
         if self._fused(sh_lights, textures, mesh, bary):
             positions = mesh.vertices.index_select(0, used).to(dtype)  # [U, 3]
@@ -316,8 +319,9 @@ def _vertex_irradiance(
     ``subset`` [U] (long) are the mesh vertices the normals belong to (None: all V vertices, U = V).
     """
     lobe = cosine_lobe_coefficients(bands).to(coeffs)  # [B²]
-    # unshadowed sum_lm A_l c_lm Y_lm(n): one product with the filtered coefficients, no per-band sums
-    irradiance = sh_basis_rows(normals, bands).T @ (lobe[:, None] * coeffs)  # [V, K*3]
+    # transfer A_l Y_lm(n) - O[lm] per vertex, then one product with the lights (fewer [U, B²] x [B², K*3]
+    # products forward and backward than filtering the lights and subtracting a second product)
+    transfer_rows = sh_basis_rows(normals, bands).T * lobe  # [U, B²]
     if transfer is not None:
         occluded = transfer.occluded
         num_vertices = normals.shape[0] if subset is None else None
@@ -328,8 +332,8 @@ def _vertex_irradiance(
             )
         if subset is not None:
             occluded = occluded.index_select(0, subset)
-        irradiance = irradiance - occluded[:, : bands * bands].to(coeffs.dtype) @ coeffs
-    return irradiance
+        transfer_rows = transfer_rows - occluded[:, : bands * bands].to(coeffs.dtype)
+    return transfer_rows @ coeffs
 
 
 class ShadowTransferCache:
@@ -521,14 +525,14 @@ def _renumber(corners: torch.Tensor, num_vertices: int) -> tuple[torch.Tensor, t
 def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor) -> torch.Tensor:
     """Perspective-correct barycentrics [N, 3] of the pixel centres ``covered`` in triangles ``tri``."""
     pixels, depth = camera.project(mesh.vertices)  # [V, 2], [V]
-    corners = mesh.triangles[tri]  # [N, 3]
+    corners = mesh.triangles.index_select(0, tri)  # [N, 3]
+    width = camera.width
+    q = torch.stack([covered % width, covered // width], -1).to(pixels.dtype) + 0.5  # [N, 2]
+    if kernels.enabled(pixels, depth) and pixels.dtype == depth.dtype:
+        return _KernelBarycentrics.apply(pixels, depth, corners, q)
     flat = corners.reshape(-1)
     p = pixels.index_select(0, flat).reshape(-1, 3, 2)  # [N, 3, 2]
     z = depth.index_select(0, flat).reshape(-1, 3)  # [N, 3]
-    width = camera.width
-    q = torch.stack([covered % width, covered // width], -1).to(p.dtype) + 0.5  # [N, 2]
-    if kernels.enabled(p, z) and p.dtype == z.dtype:
-        return _KernelBarycentrics.apply(p, z, q)
 
     def cross2(a, b):
         return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
@@ -543,16 +547,17 @@ def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.
 
 
 class _KernelBarycentrics(torch.autograd.Function):
-    """The numba path of ``_barycentrics``: projected corners [N, 3, 2], depths [N, 3], centres [N, 2]."""
+    """The numba path of ``_barycentrics``: projected vertices [V, 2], their depths [V], triangle corners
+    [N, 3] and pixel centres [N, 2]; the corners are gathered (and their gradients scattered) in the kernels."""
 
     @staticmethod
-    def forward(ctx, corners_px, depth, centres):
-        ctx.save_for_backward(corners_px, depth, centres)
-        return kernels.barycentrics_forward(corners_px, depth, centres)
+    def forward(ctx, pixels, depth, corners, centres):
+        ctx.save_for_backward(pixels, depth, corners, centres)
+        return kernels.barycentrics_forward(pixels, depth, corners, centres)
 
     @staticmethod
     def backward(ctx, grad):
-        return (*kernels.barycentrics_backward(*ctx.saved_tensors, grad), None)
+        return (*kernels.barycentrics_backward(*ctx.saved_tensors, grad), None, None)
 
 
 def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
