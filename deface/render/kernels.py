@@ -235,7 +235,7 @@ def vertex_normals_forward(vertices: torch.Tensor, triangles: torch.Tensor) -> t
     verts, tris = _array(vertices), _array(triangles)
     offsets, slots = _corners_by_vertex(tris, verts.shape[0])
     out = np.empty(verts.shape, dtype=verts.dtype)
-    _vertex_normals(verts, tris, offsets, slots, out)
+    _pick(_vertex_normals)(verts, tris, offsets, slots, out)
     return torch.from_numpy(out)
 
 
@@ -244,7 +244,8 @@ def vertex_normals_backward(vertices: torch.Tensor, triangles: torch.Tensor, gra
     verts, tris = _array(vertices), _array(triangles)
     offsets, slots = _corners_by_vertex(tris, verts.shape[0])
     out = np.empty(verts.shape, dtype=verts.dtype)
-    _vertex_normals_vjp(verts, tris, offsets, slots, _array(grad), out)
+    grad_sum = np.empty(verts.shape)  # d loss / d (unnormalised sum of face normals) per vertex
+    _pick(_vertex_normals_vjp)(verts, tris, offsets, slots, _array(grad), grad_sum, out)
     return torch.from_numpy(out)
 
 
@@ -497,30 +498,29 @@ if numba is not None:
 
     @_serial_and_parallel
     def _barycentrics_backward(pixels, depth, tri, centres, tiny, grad, grad_p, grad_z):
-        """Gradients to each pixel's corners: grad_p [N, 3, 2], grad_z [N, 3]."""
+        """Gradients to each pixel's corners: grad_p [N, 3, 2], grad_z [N, 3] (reciprocals: few divisions)."""
         for n in prange(grad.shape[0]):
             edges = _edge_functions(pixels, tri, centres, n)
-            z0, z1, z2 = depth[tri[n, 0]], depth[tri[n, 1]], depth[tri[n, 2]]
             area = edges[6] + edges[7] + edges[8]
             degenerate = abs(area) < tiny
             if degenerate:
                 area = tiny
-            w0, w1, w2 = edges[6] / area / z0, edges[7] / area / z1, edges[8] / area / z2
-            total = w0 + w1 + w2
-            mean = (grad[n, 0] * w0 + grad[n, 1] * w1 + grad[n, 2] * w2) / total
+            inv_area = 1.0 / area
+            inv_z = (1.0 / depth[tri[n, 0]], 1.0 / depth[tri[n, 1]], 1.0 / depth[tri[n, 2]])
+            w = (edges[6] * inv_area * inv_z[0], edges[7] * inv_area * inv_z[1], edges[8] * inv_area * inv_z[2])
+            inv_total = 1.0 / (w[0] + w[1] + w[2])
+            mean = (grad[n, 0] * w[0] + grad[n, 1] * w[1] + grad[n, 2] * w[2]) * inv_total
             grad_area = 0.0
             for i in range(3):
-                z_i = depth[tri[n, i]]
-                h = (grad[n, i] - mean) / total  # d loss / d w_i
-                w = edges[6 + i] / area / z_i
-                grad_z[n, i] = -h * w / z_i
-                grad_area -= h * w / area
+                h = (grad[n, i] - mean) * inv_total  # d loss / d w_i
+                grad_z[n, i] = -h * w[i] * inv_z[i]
+                grad_area -= h * w[i] * inv_area
                 grad_p[n, i, 0], grad_p[n, i, 1] = 0.0, 0.0
             if degenerate:
                 grad_area = 0.0
             for i in range(3):  # s_i = d_j.x d_k.y - d_j.y d_k.x
                 j, k = (i + 1) % 3, (i + 2) % 3
-                g = ((grad[n, i] - mean) / total) / area / depth[tri[n, i]] + grad_area
+                g = (grad[n, i] - mean) * inv_total * inv_area * inv_z[i] + grad_area
                 grad_p[n, j, 0] += g * edges[3 + k]
                 grad_p[n, j, 1] -= g * edges[k]
                 grad_p[n, k, 0] -= g * edges[3 + j]
@@ -949,7 +949,8 @@ if numba is not None:
 
     @njit(inline="always")
     def _face_cross(vertices, triangles, f):
-        """(x1 - x0) x (x2 - x0) of face f and its two edges a = x1 - x0, b = x2 - x0."""
+        """(x1 - x0) x (x2 - x0) of face f and its two edges a = x1 - x0, b = x2 - x0, as one flat tuple
+        (cx, cy, cz, ax, ay, az, bx, by, bz): nested tuples trip numba's parfor analysis."""
         i0, i1, i2 = triangles[f, 0], triangles[f, 1], triangles[f, 2]
         ax, ay, az = (
             vertices[i1, 0] - vertices[i0, 0],
@@ -961,29 +962,28 @@ if numba is not None:
             vertices[i2, 1] - vertices[i0, 1],
             vertices[i2, 2] - vertices[i0, 2],
         )
-        return (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx), (ax, ay, az), (bx, by, bz)
+        return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx, ax, ay, az, bx, by, bz
 
     @njit(inline="always")
     def _vertex_sum(vertices, triangles, offsets, slots, v):
         """Sum of the incident faces' cross products at vertex v (faces in index order)."""
         mx, my, mz = 0.0, 0.0, 0.0
         for k in range(offsets[v], offsets[v + 1]):
-            cross, _, _ = _face_cross(vertices, triangles, slots[k] // 3)
+            cross = _face_cross(vertices, triangles, slots[k] // 3)
             mx, my, mz = mx + cross[0], my + cross[1], mz + cross[2]
         return mx, my, mz
 
-    @njit(cache=True)
+    @_serial_and_parallel
     def _vertex_normals(vertices, triangles, offsets, slots, out):
-        for v in range(vertices.shape[0]):
+        for v in prange(vertices.shape[0]):
             mx, my, mz = _vertex_sum(vertices, triangles, offsets, slots, v)
             norm = max(np.sqrt(mx * mx + my * my + mz * mz), 1e-12)
             out[v, 0], out[v, 1], out[v, 2] = mx / norm, my / norm, mz / norm
 
-    @njit(cache=True)
-    def _vertex_normals_vjp(vertices, triangles, offsets, slots, grad, out):
+    @_serial_and_parallel
+    def _vertex_normals_vjp(vertices, triangles, offsets, slots, grad, grad_sum, out):
         # d loss / d (unnormalised sum) per vertex: n = m / max(|m|, 1e-12)
-        grad_sum = np.empty(vertices.shape)
-        for v in range(vertices.shape[0]):
+        for v in prange(vertices.shape[0]):
             mx, my, mz = _vertex_sum(vertices, triangles, offsets, slots, v)
             norm = np.sqrt(mx * mx + my * my + mz * mz)
             clamped = max(norm, 1e-12)
@@ -992,11 +992,12 @@ if numba is not None:
             grad_sum[v, 0] = grad[v, 0] / clamped - scale * mx
             grad_sum[v, 1] = grad[v, 1] / clamped - scale * my
             grad_sum[v, 2] = grad[v, 2] / clamped - scale * mz
-        for v in range(vertices.shape[0]):
+        for v in prange(vertices.shape[0]):
             gx, gy, gz = 0.0, 0.0, 0.0
             for k in range(offsets[v], offsets[v + 1]):
                 f, corner = slots[k] // 3, slots[k] % 3
-                _, a, b = _face_cross(vertices, triangles, f)
+                edges = _face_cross(vertices, triangles, f)
+                a, b = edges[3:6], edges[6:9]
                 cx, cy, cz = 0.0, 0.0, 0.0  # d loss / d cross product of face f
                 for i in range(3):
                     w = triangles[f, i]
