@@ -250,9 +250,13 @@ def vertex_normals_backward(vertices: torch.Tensor, triangles: torch.Tensor, gra
 
 
 # -- primary-ray selection --------------------------------------------------------------------------
+_BOX_SLACK = 0.05
+"""Pixels (fraction of a pixel) by which ``triangle_box_pixels`` widens each projected triangle box."""
+
+
 def triangle_box_pixels(pixels: torch.Tensor, triangles: torch.Tensor, height: int, width: int) -> np.ndarray:
     """Flat indices (ascending) of the pixels whose centre lies in some triangle's projected bounding box,
-    widened by one pixel against rounding: vertices projected to pixels [V, 2], triangles [F, 3].
+    widened by _BOX_SLACK against rounding: vertices projected to pixels [V, 2], triangles [F, 3].
 
     Only valid when every vertex is in front of the camera (otherwise the projected boxes mean nothing).
     """
@@ -1024,9 +1028,12 @@ if numba is not None:
             hi_y = max(pixels[i0, 1], pixels[i1, 1], pixels[i2, 1])
             if not (np.isfinite(lo_x) and np.isfinite(hi_x) and np.isfinite(lo_y) and np.isfinite(hi_y)):
                 continue  # a degenerate (NaN) triangle: no ray can hit it
-            # pixel x has its centre at x + 0.5: centres in [lo - 1, hi + 1] (one pixel of slack)
-            x0, x1 = max(int(np.floor(lo_x - 1.5)), 0), min(int(np.ceil(hi_x + 0.5)), width - 1)
-            y0, y1 = max(int(np.floor(lo_y - 1.5)), 0), min(int(np.ceil(hi_y + 0.5)), height - 1)
+            # pixel x has its centre at x + 0.5: centres in [lo - slack, hi + slack]; the slack covers the
+            # float32 rounding of Embree's rays and of this projection (~1e-4 px) many times over
+            x0 = max(int(np.ceil(lo_x - 0.5 - _BOX_SLACK)), 0)
+            x1 = min(int(np.floor(hi_x - 0.5 + _BOX_SLACK)), width - 1)
+            y0 = max(int(np.ceil(lo_y - 0.5 - _BOX_SLACK)), 0)
+            y1 = min(int(np.floor(hi_y - 0.5 + _BOX_SLACK)), height - 1)
             for y in range(y0, y1 + 1):
                 for x in range(x0, x1 + 1):
                     mask[y, x] = True
