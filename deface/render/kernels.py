@@ -249,6 +249,18 @@ def vertex_normals_backward(vertices: torch.Tensor, triangles: torch.Tensor, gra
     return torch.from_numpy(out)
 
 
+# -- vertex subsets --------------------------------------------------------------------------------
+def renumber(corners: torch.Tensor, num_vertices: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """renderer._renumber: the vertices used by ``corners`` [N, 3] (ascending, [U]) and the corners
+    renumbered into them [N, 3] (one pass to flag, one to number, one to map; no torch index ops)."""
+    new_index = np.zeros(num_vertices, dtype=np.int64)
+    local = np.empty(tuple(corners.shape), dtype=np.int64)
+    count = _flag_and_number(_array(corners), new_index)
+    used = np.empty(count, dtype=np.int64)
+    _map_corners(_array(corners), new_index, used, local)
+    return torch.from_numpy(used), torch.from_numpy(local)
+
+
 # -- primary-ray selection --------------------------------------------------------------------------
 _BOX_SLACK = 0.05
 """Pixels (fraction of a pixel) by which ``triangle_box_pixels`` widens each projected triangle box."""
@@ -1016,6 +1028,30 @@ if numba is not None:
                     sign = 1.0 if corner == 2 else -1.0
                     gx, gy, gz = gx + sign * ex, gy + sign * ey, gz + sign * ez
             out[v, 0], out[v, 1], out[v, 2] = gx, gy, gz
+
+    @njit(cache=True)
+    def _flag_and_number(corners, new_index):
+        """new_index[v] = rank of v among the used vertices (ascending), -1 for unused; returns their count."""
+        for n in range(corners.shape[0]):
+            for i in range(3):
+                new_index[corners[n, i]] = 1
+        count = 0
+        for v in range(new_index.shape[0]):
+            if new_index[v]:
+                new_index[v] = count
+                count += 1
+            else:
+                new_index[v] = -1
+        return count
+
+    @njit(cache=True)
+    def _map_corners(corners, new_index, used, local):
+        for v in range(new_index.shape[0]):
+            if new_index[v] >= 0:
+                used[new_index[v]] = v
+        for n in range(corners.shape[0]):
+            for i in range(3):
+                local[n, i] = new_index[corners[n, i]]
 
     @njit(cache=True)
     def _mark_triangle_boxes(pixels, triangles, mask):

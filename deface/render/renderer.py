@@ -319,21 +319,22 @@ def _vertex_irradiance(
     ``subset`` [U] (long) are the mesh vertices the normals belong to (None: all V vertices, U = V).
     """
     lobe = cosine_lobe_coefficients(bands).to(coeffs)  # [B²]
-    # transfer A_l Y_lm(n) - O[lm] per vertex, then one product with the lights (fewer [U, B²] x [B², K*3]
-    # products forward and backward than filtering the lights and subtracting a second product)
-    transfer_rows = sh_basis_rows(normals, bands).T * lobe  # [U, B²]
+    # transfer A_l Y_lm(n) - O[lm] per vertex, channel-first [B², U] like the basis rows (mixed layouts make
+    # the element-wise ops slow), then one product with the lights: fewer [U, B²] x [B², K*3] products
+    # forward and backward than filtering the lights and subtracting a second product
+    transfer_rows = sh_basis_rows(normals, bands) * lobe[:, None]  # [B², U]
     if transfer is not None:
-        occluded = transfer.occluded
+        occluded = transfer.occluded_rows  # [B²', V]
         num_vertices = normals.shape[0] if subset is None else None
-        if transfer.bands < bands or (num_vertices is not None and occluded.shape[0] != num_vertices):
+        if transfer.bands < bands or (num_vertices is not None and occluded.shape[1] != num_vertices):
             raise ValueError(
-                f"shadow transfer has {transfer.bands} bands for {occluded.shape[0]} vertices, "
+                f"shadow transfer has {transfer.bands} bands for {occluded.shape[1]} vertices, "
                 f"need >= {bands} bands for {normals.shape[0]}"
             )
         if subset is not None:
-            occluded = occluded.index_select(0, subset)
-        transfer_rows = transfer_rows - occluded[:, : bands * bands].to(coeffs.dtype)
-    return transfer_rows @ coeffs
+            occluded = occluded.index_select(1, subset)
+        transfer_rows = transfer_rows - occluded[: bands * bands].to(coeffs.dtype)
+    return transfer_rows.T @ coeffs
 
 
 class ShadowTransferCache:
@@ -515,6 +516,8 @@ def _csr(rows: torch.Tensor, columns: torch.Tensor, values: torch.Tensor, size: 
 
 def _renumber(corners: torch.Tensor, num_vertices: int) -> tuple[torch.Tensor, torch.Tensor]:
     """The vertices used by ``corners`` [N, 3] (sorted, [U]) and the corners renumbered into them."""
+    if kernels.enabled(corners):
+        return kernels.renumber(corners, num_vertices)
     flags = torch.zeros(num_vertices, dtype=torch.bool, device=corners.device)
     flags[corners.reshape(-1)] = True
     used = torch.nonzero(flags)[:, 0]  # [U]

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import torch
@@ -46,6 +47,11 @@ class ShadowTransfer:
     vertices: torch.Tensor  # [V, 3] detached positions the transfer was computed for (refresh test)
     bands: int  # B
     rays: int  # S rays per vertex
+
+    @cached_property
+    def occluded_rows(self) -> torch.Tensor:
+        """``occluded`` channel-first [B², V] (contiguous; computed once per refresh), the renderer's layout."""
+        return self.occluded.T.contiguous()
 
 
 def hemisphere_directions(count: int) -> np.ndarray:
