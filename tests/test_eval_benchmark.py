@@ -6,11 +6,36 @@ import json
 import shutil
 
 from deface.eval import identity
-from deface.eval.benchmark import TABLES, VARIANTS, report_markdown, run_benchmark, update_benchmarks_md
+from deface.eval.benchmark import (
+    TABLES,
+    VARIANTS,
+    report_markdown,
+    run_benchmark,
+    update_benchmarks_md,
+    variant_config,
+)
 
 
 def test_every_table_row_names_a_variant():
     assert all(name in VARIANTS for _, rows in TABLES for _, name in rows)
+
+
+def _row_configs(title_start: str) -> dict:
+    rows = next(rows for title, rows in TABLES if title.startswith(title_start))
+    return {label: variant_config(VARIANTS[name], "quick") for label, name in rows}
+
+
+def test_ablation_rows_have_the_configuration_their_label_says():
+    # Rows point at "ours" where the default preset is that row, so a changed default must show up here.
+    for label, config in _row_configs("Initial light conditions").items():
+        assert f"n = {config.lights.num_lights}" in label, label
+    switches = {label: (c.decouple.light_masks, c.decouple.face_region) for label, c in _row_configs("Neural").items()}
+    assert switches == {"w/o f, w/o g": (False, False), "+ f (Ours)": (True, False), "+ g only": (False, True),
+                        "+ f + g": (True, True)}
+    priors = {label: (c.priors.global_prior, c.priors.local_prior) for label, c in _row_configs("Priors").items()}
+    assert priors == {"NA": (False, False), "GP": (True, False), "GP + LP (Ours)": (True, True)}
+    for label, config in _row_configs("One global SH").items():
+        assert f"B = {config.lights.bands}" == label and config.lights.num_lights == 1
 
 
 def test_benchmark_smoke_run_writes_metrics_and_tables(photos, tmp_path):

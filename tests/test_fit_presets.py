@@ -22,11 +22,11 @@ def test_default_is_the_deface_preset():
     assert presets.get("default").preset == "deface"
 
 
-def test_deface_differs_from_paper_only_in_face_region_and_ace_threshold():
+def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
     paper, deface = _flatten(to_dict(presets.get("paper"))), _flatten(to_dict(presets.get("deface")))
-    changed = {key for key in paper if paper[key] != deface[key]}
-    assert changed == {"preset", "decouple.face_region", "decouple.epsilon"}
-    assert deface["decouple.face_region"] is False and deface["decouple.epsilon"] == 0.09
+    changed = {key: deface[key] for key in paper if paper[key] != deface[key]}
+    assert changed == {"preset": "deface", "decouple.face_region": False, "decouple.epsilon": 0.09,
+                       "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES}
 
 
 def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():

@@ -10,12 +10,15 @@
 - ``nextface-star``: ``nextface`` restricted to the face region h (NextFace* of the paper).
 - ``fast``: ``deface`` with fewer iterations, a 192-px working image and 256-px textures, for previews and
   tests.
-- ``deface``: the paper's method with two changes measured on the benchmark (BENCHMARKS.md):
+- ``deface``: the paper's method with four changes measured on the benchmark (BENCHMARKS.md):
   M_o = M_R h (the face-region classifier itself) instead of the distilled field g, which is trained to match
   h but may shrink wherever the render fits badly (L_pho ignores pixels outside M_o; with the offline
-  skin-colour h that cost the texture transfer about 2 dB); and the ACE threshold eps = 0.09 of the authors'
+  skin-colour h that cost the texture transfer about 2 dB); the ACE threshold eps = 0.09 of the authors'
   portrait-shadow config instead of 0.17, because a foreign shadow often covers less than 17 % of the face
-  and ACE then dropped its light (+0.4 dB on the first 8 pairs, +0.5 dB on the other 8). ``paper`` keeps both.
+  and ACE then dropped its light; n = 3 initial lights instead of 5 (one lit, one shadowed, one spare is
+  what a cast shadow needs; more lights split the lit skin); and 4 octaves of sin/cos features
+  on f's input, without which the authors' small MLP on raw (x, y) cannot draw the sharp, thin edges of
+  blinds, fingers and leaves and the shadow is baked into the texture. ``paper`` keeps the paper's values.
 - ``default``: the preset ``deface fit`` uses when none is given (see DEFAULT_PRESET).
 """
 
@@ -64,8 +67,16 @@ def _nextface(name: str, restrict_to_face: bool) -> FitConfig:
     )
 
 
+# Octaves of Fourier features on f's (x, y, t) in the default preset (chosen on the benchmark, BENCHMARKS.md).
+FOURIER_OCTAVES = 4
+
+
 def _deface() -> FitConfig:
-    return FitConfig(preset="deface", decouple=DecoupleConfig(face_region=False, epsilon=0.09))
+    return FitConfig(
+        preset="deface",
+        lights=LightConfig(num_lights=3),
+        decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES),
+    )
 
 
 def _fast() -> FitConfig:
