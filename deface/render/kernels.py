@@ -329,14 +329,13 @@ def shade_backward(plain, bands_v, uvs, bary, textures, pixels, width, grads, ne
     grad_bary = np.empty((num, 3), dtype=dtype)
     scattered = (grad_plain, grad_bands, grad_texels, grad_bary)
     _pick(_shade_backward)(*arrays, covered, corners, uv_corners, width, given, *outputs, lit, *scattered)
-    uv = _shade_uv(arrays[2], arrays[3], uv_corners) if any(need_textures) else None
-    texture_grads = []
-    for texture, start, need in zip(arrays[4:], (0, 3, 6), need_textures, strict=True):
-        grad_texture = None
-        if need:
-            grad_texture = np.zeros(texture.shape, dtype=dtype)
-            _bilinear_scatter(uv, grad_texels[:, start : start + texture.shape[2]], grad_texture)
-        texture_grads.append(None if grad_texture is None else torch.from_numpy(grad_texture))
+    texture_grads = [
+        np.zeros(texture.shape if need else (0, 0, texture.shape[2]), dtype=dtype)
+        for texture, need in zip(arrays[4:], need_textures, strict=True)
+    ]
+    if any(need_textures):  # one serial pass for the three maps (they share the texel set-up)
+        _scatter_texel_grads(arrays[2], arrays[3], uv_corners, grad_texels, arrays[4].shape[:2], tuple(texture_grads))
+    texture_grads = [torch.from_numpy(g) if g.size else None for g in texture_grads]
     grad_vertex, grad_bands = _sum_parts(grad_plain), _sum_parts(grad_bands).reshape(used, bands, channels)
     return torch.from_numpy(grad_vertex), torch.from_numpy(grad_bands), torch.from_numpy(grad_bary), texture_grads
 
@@ -719,12 +718,27 @@ if numba is not None:
         return (t01 - t00) * (1.0 - fy) + (t11 - t10) * fy, (t10 - t00) * (1.0 - fx) + (t11 - t01) * fx
 
     @njit(cache=True)
-    def _shade_uv(uvs, bary, uv_corners):
-        """Interpolated uv [N, 2] of the covered pixels."""
-        out = np.empty((bary.shape[0], 2), dtype=bary.dtype)
+    def _scatter_texel_grads(uvs, bary, uv_corners, grad_texels, size, grad_maps):
+        """Bilinear scatter of grad_texels [N, 7] (diffuse, specular, roughness columns) into the maps' gradients
+        ``grad_maps`` (3 arrays [Ht, Wt, C]; empty ones are skipped), serial in pixel order (texels are shared)."""
+        height, width = size
         for p in range(bary.shape[0]):
-            out[p, 0], out[p, 1] = _uv_at(uvs, bary, uv_corners, p)
-        return out
+            u, v = _uv_at(uvs, bary, uv_corners, p)
+            x0, fx, _ = _texel_axis(u, width)
+            y0, fy, _ = _texel_axis(1.0 - v, height)
+            x1, y1 = min(x0 + 1, width - 1), min(y0 + 1, height - 1)
+            column = 0
+            for m in range(len(grad_maps)):
+                grad_map = grad_maps[m]
+                channels = grad_map.shape[2]
+                if grad_map.shape[0] > 0:
+                    for c in range(channels):
+                        g = grad_texels[p, column + c]
+                        grad_map[y0, x0, c] += g * (1.0 - fx) * (1.0 - fy)
+                        grad_map[y0, x1, c] += g * fx * (1.0 - fy)
+                        grad_map[y1, x0, c] += g * (1.0 - fx) * fy
+                        grad_map[y1, x1, c] += g * fx * fy
+                column += channels
 
     @njit(inline="always")
     def _uv_at(uvs, bary, uv_corners, p):
