@@ -9,9 +9,13 @@ in hundreds of small ops, broadcasts and [N, B*C] temporaries; one loop per pixe
 in benchmarks/render.md).
 
 Determinism: every output element is written by exactly one loop iteration in a fixed order. Gradients
-that scatter to vertices are computed in *gather* form (for each vertex, its (pixel, corner) entries
-in pixel order, from a counting sort), so results are bit-identical for any number of threads. The
-texture-gradient scatter runs on one thread.
+that scatter to vertices are either computed in *gather* form (for each vertex, its entries in a fixed
+order, from a counting sort) or, in the shade backward, scattered in pixel order into a fixed number
+(_SCATTER_PARTS) of per-range buffers summed in order; so results are bit-identical for any number of
+threads. The texture-gradient and barycentric-corner scatters run on one thread.
+
+Threads: ``set_threads`` (or DEFACE_RENDER_THREADS) sets the kernels' threads independently of torch's;
+by default they follow ``torch.get_num_threads()``.
 """
 
 from __future__ import annotations
@@ -188,11 +192,12 @@ def sh_constants(diagonal: list[float], rows: list[tuple[list[float], list[float
     return np.asarray(diagonal, dtype=np.float64), a, b
 
 
-def sh_basis_forward(directions: torch.Tensor, constants) -> torch.Tensor:
-    """Real SH basis (sh.py's convention) at unit directions [N, 3] -> rows [B², N]."""
+def sh_basis_forward(directions: torch.Tensor, constants, channel_first: bool = True) -> torch.Tensor:
+    """Real SH basis (sh.py's convention) at unit directions [N, 3] -> rows [B², N] (or [N, B²])."""
     dirs = _array(directions)
-    out = np.empty((constants[0].shape[0] ** 2, dirs.shape[0]), dtype=dirs.dtype)
-    _pick(_sh_basis)(dirs, constants, _SH_CHUNK, out)
+    size = constants[0].shape[0] ** 2
+    out = np.empty((size, dirs.shape[0]) if channel_first else (dirs.shape[0], size), dtype=dirs.dtype)
+    _pick(_sh_basis)(dirs, constants, _SH_CHUNK, out, channel_first)
     return torch.from_numpy(out)
 
 
@@ -606,7 +611,7 @@ if numba is not None:
                         d_rows[2, centre - m, k] = root2 * d_cur[m, k] * sin_m[m, k]
 
     @_serial_and_parallel
-    def _sh_basis(directions, constants, chunk, out):
+    def _sh_basis(directions, constants, chunk, out, channel_first):
         bands = constants[0].shape[0]
         count = directions.shape[0]
         for block in prange((count + chunk - 1) // chunk):
@@ -614,9 +619,14 @@ if numba is not None:
             size = min(count, start + chunk) - start
             rows = np.empty((bands * bands, chunk))
             _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
-            for j in range(bands * bands):
+            if channel_first:
+                for j in range(bands * bands):
+                    for k in range(size):
+                        out[j, start + k] = rows[j, k]
+            else:  # [N, B²]: a transpose within the block (it stays in cache)
                 for k in range(size):
-                    out[j, start + k] = rows[j, k]
+                    for j in range(bands * bands):
+                        out[start + k, j] = rows[j, k]
 
     @_serial_and_parallel
     def _sh_basis_vjp(directions, constants, grad, chunk, out):

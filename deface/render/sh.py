@@ -47,8 +47,10 @@ def sh_basis(directions: torch.Tensor, bands: int) -> torch.Tensor:
     """
     if directions.shape[-1] != 3:
         raise ValueError(f"sh_basis: directions must have shape [..., 3], got {tuple(directions.shape)}")
-    rows = sh_basis_rows(directions.reshape(-1, 3), bands)  # [B², N]; backward makes grads contiguous
-    return rows.T.reshape(*directions.shape[:-1], bands * bands)
+    if bands < 1:
+        raise ValueError(f"sh_basis: bands must be >= 1, got {bands}")
+    basis = _SHBasis.apply(directions.reshape(-1, 3), bands, False)  # [N, B²], row-major
+    return basis.reshape(*directions.shape[:-1], bands * bands)
 
 
 def sh_basis_rows(directions: torch.Tensor, bands: int) -> torch.Tensor:
@@ -61,7 +63,7 @@ def sh_basis_rows(directions: torch.Tensor, bands: int) -> torch.Tensor:
         raise ValueError(f"sh_basis_rows: directions must be [N, 3], got {tuple(directions.shape)}")
     if bands < 1:
         raise ValueError(f"sh_basis: bands must be >= 1, got {bands}")
-    return _SHBasis.apply(directions, bands)
+    return _SHBasis.apply(directions, bands, True)
 
 
 def _legendre_rows(z: torch.Tensor, bands: int, derivative: bool):
@@ -106,7 +108,7 @@ def _azimuth_rows(x: torch.Tensor, y: torch.Tensor, bands: int) -> tuple[torch.T
 
 
 class _SHBasis(torch.autograd.Function):
-    """Y [B², N] from directions [N, 3]; backward contracts the analytic Jacobian.
+    """Y [B², N] (``channel_first``) or [N, B²] from directions [N, 3]; backward contracts the analytic Jacobian.
 
     With Y_lm = sqrt2 Q C_m, Y_l-m = sqrt2 Q S_m (C + iS = (x + iy)^m):
     dC_m/dx = m C_{m-1}, dC_m/dy = -m S_{m-1}, dS_m/dx = m S_{m-1}, dS_m/dy = m C_{m-1}, and dQ/dz from
@@ -114,19 +116,21 @@ class _SHBasis(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, directions: torch.Tensor, bands: int) -> torch.Tensor:
-        ctx.bands = bands
+    def forward(ctx, directions: torch.Tensor, bands: int, channel_first: bool) -> torch.Tensor:
+        ctx.bands, ctx.channel_first = bands, channel_first
         ctx.save_for_backward(directions)
-        if kernels.enabled(directions):  # the same recurrences, one loop per direction
-            return kernels.sh_basis_forward(directions, _kernel_constants(bands))
-        return _sh_rows_forward(directions, bands)
+        if kernels.enabled(directions):  # the same recurrences, along blocks of directions
+            return kernels.sh_basis_forward(directions, _kernel_constants(bands), channel_first)
+        rows = _sh_rows_forward(directions, bands)
+        return rows if channel_first else rows.T
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):
         (directions,) = ctx.saved_tensors
+        grad_rows = grad if ctx.channel_first else grad.T  # [B², N]
         if kernels.enabled(directions, grad):
-            return kernels.sh_basis_backward(directions, grad, _kernel_constants(ctx.bands)), None
-        return _sh_rows_vjp(directions, grad, ctx.bands), None
+            return kernels.sh_basis_backward(directions, grad_rows, _kernel_constants(ctx.bands)), None, None
+        return _sh_rows_vjp(directions, grad_rows, ctx.bands), None, None
 
 
 def _sh_rows_forward(directions: torch.Tensor, bands: int) -> torch.Tensor:
