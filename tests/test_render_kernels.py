@@ -7,8 +7,9 @@ import torch
 from test_render_gradients import Loss
 
 from deface.render import kernels
+from deface.render.camera import Camera
 from deface.render.mesh import sample_texture
-from deface.render.renderer import RenderConfig, Renderer, _filtered_interpolation
+from deface.render.renderer import RenderConfig, Renderer, _filtered_interpolation, _specular_bands
 from deface.render.sh import sh_basis_rows
 
 pytestmark = pytest.mark.skipif(kernels.numba is None, reason="numba is not installed")
@@ -56,6 +57,23 @@ def test_filtered_interpolation_matches_sparse_reference():
         return values_and_grads(lambda v, b, f: _filtered_interpolation(v, corners, b, f), [values, bary, lobe])
 
     assert_close(*both_paths(run))
+
+
+def test_specular_band_sums_match_reference_with_camera_gradients():
+    """Mirrored view directions and their band sums, with gradients to positions, normals and the camera pose."""
+    gen = torch.Generator().manual_seed(0)
+    positions = torch.randn(60, 3, generator=gen, dtype=torch.float64)
+    normals = torch.nn.functional.normalize(torch.randn(60, 3, generator=gen, dtype=torch.float64), dim=1)
+    coeffs = torch.randn(16, 6, generator=gen, dtype=torch.float64)
+    rotation = torch.tensor([3.0, 0.1, -0.2], dtype=torch.float64)
+    translation = torch.tensor([0.2, -0.1, 8.0], dtype=torch.float64)
+    focal = torch.tensor(30.0, dtype=torch.float64)
+
+    def bands(x, n, c, r, t):
+        return _specular_bands(x, n, Camera(focal, r, t, 32, 32), c, 4)
+
+    inputs = [positions, normals, coeffs, rotation, translation]
+    assert_close(*both_paths(lambda: values_and_grads(bands, inputs)))
 
 
 def test_vertex_normals_match_reference():

@@ -385,11 +385,29 @@ def _specular_bands(
     exchange for ~4-5x fewer SH evaluations (ICT at 256²: 6.2k used vertices, 29k pixels). Since
     Lambda_0 = 1 and barycentrics sum to 1, a constant environment still gives exactly k_s L.
     """
-    view = camera.center_in_model().to(positions) - positions
-    view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [U, 3] towards the camera
-    reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [U, 3]
-    reflected = reflected / reflected.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # unit for the SH
+    centre = camera.center_in_model().to(positions)
+    if kernels.enabled(positions, normals, centre) and positions.dtype == normals.dtype:
+        reflected = _KernelReflection.apply(positions, normals, centre)
+    else:
+        view = centre - positions
+        view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [U, 3] towards the camera
+        reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [U, 3]
+        reflected = reflected / reflected.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # unit for the SH
     return sh_band_sums(reflected.to(coeffs.dtype), coeffs).reshape(positions.shape[0], -1)
+
+
+class _KernelReflection(torch.autograd.Function):
+    """The numba path of the mirrored view directions in ``_specular_bands`` (the same formulas, one loop
+    per vertex instead of ~12 small ops and their backward): positions, normals [U, 3], centre [3]."""
+
+    @staticmethod
+    def forward(ctx, positions, normals, centre):
+        ctx.save_for_backward(positions, normals, centre)
+        return kernels.reflect_forward(positions, normals, centre)
+
+    @staticmethod
+    def backward(ctx, grad):
+        return kernels.reflect_backward(*ctx.saved_tensors, grad)
 
 
 def _radiance(irradiance, diffuse, lit, visibility, specular) -> torch.Tensor:
