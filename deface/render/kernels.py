@@ -158,24 +158,36 @@ def bilinear_backward(texture: torch.Tensor, uv: torch.Tensor, grad: torch.Tenso
 
 
 # -- perspective-correct barycentrics ---------------------------------------------------------------
-def barycentrics_forward(pixels, depth, corners, centres) -> torch.Tensor:
-    """Barycentrics [N, 3] of pixel centres [N, 2] in triangles ``corners`` [N, 3] of the vertices projected
-    to ``pixels`` [V, 2] with camera depths ``depth`` [V] (renderer._barycentrics' formula)."""
+def barycentrics_forward(pixels, depth, covered) -> torch.Tensor:
+    """Perspective-correct barycentrics [N, 3] (renderer._barycentrics' formula) of the covered pixels'
+    centres in their triangles, from the vertices projected to ``pixels`` [V, 2] with camera depths ``depth``
+    [V]; covered = (triangles [F, 3], triangle id [N] and flat index y * W + x [N] per pixel, (H, W))."""
     p = _array(pixels)
-    out = np.empty((centres.shape[0], 3), dtype=p.dtype)
-    _pick(_barycentrics_forward)(p, _array(depth), _array(corners), _array(centres), np.finfo(p.dtype).tiny, out)
+    args = _barycentric_inputs(p, covered)
+    out = np.empty((args[1].shape[0], 3), dtype=p.dtype)
+    _pick(_barycentrics_forward)(p, _array(depth), *args, np.finfo(p.dtype).tiny, out)
     return torch.from_numpy(out)
 
 
-def barycentrics_backward(pixels, depth, corners, centres, grad) -> tuple[torch.Tensor, torch.Tensor]:
+def _barycentric_inputs(pixels: np.ndarray, covered) -> tuple:
+    """(triangles, triangle ids, flat indices, pixel-centre coordinates x + 0.5 [max(H, W)] in the pixels'
+    dtype (the centres' arithmetic stays in that dtype, as in the torch path), W) for the kernels."""
+    triangles, tri, flat, (height, width) = covered
+    centres = (np.arange(max(height, width)) + 0.5).astype(pixels.dtype)
+    return _array(triangles), _array(tri), _array(flat), centres, width
+
+
+def barycentrics_backward(pixels, depth, covered, grad) -> tuple[torch.Tensor, torch.Tensor]:
     """Gradients of ``barycentrics_forward`` to the projected vertices [V, 2] and their depths [V].
 
     Per-pixel gradients first (in parallel), then one serial scatter in pixel order (deterministic)."""
-    p, z, tri = _array(pixels), _array(depth), _array(corners)
-    grad_p, grad_z = np.empty((tri.shape[0], 3, 2), dtype=p.dtype), np.empty(tri.shape, dtype=z.dtype)
-    _pick(_barycentrics_backward)(p, z, tri, _array(centres), np.finfo(p.dtype).tiny, _array(grad), grad_p, grad_z)
+    p, z = _array(pixels), _array(depth)
+    args = _barycentric_inputs(p, covered)
+    num = args[1].shape[0]
+    grad_p, grad_z = np.empty((num, 3, 2), dtype=p.dtype), np.empty((num, 3), dtype=z.dtype)
+    _pick(_barycentrics_backward)(p, z, *args, np.finfo(p.dtype).tiny, _array(grad), grad_p, grad_z)
     grad_pixels, grad_depth = np.zeros(p.shape, dtype=p.dtype), np.zeros(z.shape, dtype=z.dtype)
-    _scatter_corners(tri, grad_p, grad_z, grad_pixels, grad_depth)
+    _scatter_corners(args[0], args[1], grad_p, grad_z, grad_pixels, grad_depth)
     return torch.from_numpy(grad_pixels), torch.from_numpy(grad_depth)
 
 
@@ -511,42 +523,47 @@ if numba is not None:
             grad_uv[p, 1] = -d_fy * slope_y  # y = (1 - v) * Ht - 0.5
 
     @njit(inline="always")
-    def _edge_functions(p, tri, q, n):
-        """Corner offsets d_i = p[tri[n, i]] - q[n] and s_i = cross(d_{i+1}, d_{i+2}) (~2 x sub-areas), as one
-        flat tuple (d0x, d1x, d2x, d0y, d1y, d2y, s0, s1, s2): scalars only, no per-pixel arrays."""
-        qx, qy = q[n, 0], q[n, 1]
-        i0, i1, i2 = tri[n, 0], tri[n, 1], tri[n, 2]
+    def _edge_functions(p, triangles, tri, flat, centres, width, n):
+        """Corner indices (i0, i1, i2) of pixel n's triangle, corner offsets d_i = p[i] - q from its centre q
+        and s_i = cross(d_{i+1}, d_{i+2}) (~2 x sub-areas), as one flat tuple (i0, i1, i2, d0x, d1x, d2x,
+        d0y, d1y, d2y, s0, s1, s2): scalars only, no per-pixel arrays."""
+        qx, qy = centres[flat[n] % width], centres[flat[n] // width]
+        f = tri[n]
+        i0, i1, i2 = triangles[f, 0], triangles[f, 1], triangles[f, 2]
         d0x, d1x, d2x = p[i0, 0] - qx, p[i1, 0] - qx, p[i2, 0] - qx
         d0y, d1y, d2y = p[i0, 1] - qy, p[i1, 1] - qy, p[i2, 1] - qy
         return (
-            d0x, d1x, d2x, d0y, d1y, d2y, d1x * d2y - d1y * d2x, d2x * d0y - d2y * d0x, d0x * d1y - d0y * d1x
+            i0, i1, i2, d0x, d1x, d2x, d0y, d1y, d2y,
+            d1x * d2y - d1y * d2x, d2x * d0y - d2y * d0x, d0x * d1y - d0y * d1x,
         )  # fmt: skip
 
     @_serial_and_parallel
-    def _barycentrics_forward(pixels, depth, tri, centres, tiny, out):
+    def _barycentrics_forward(pixels, depth, triangles, tri, flat, centres, width, tiny, out):
         for n in prange(out.shape[0]):
-            edges = _edge_functions(pixels, tri, centres, n)
-            area = edges[6] + edges[7] + edges[8]
+            edges = _edge_functions(pixels, triangles, tri, flat, centres, width, n)
+            i0, i1, i2, s0, s1, s2 = edges[0], edges[1], edges[2], edges[9], edges[10], edges[11]
+            area = s0 + s1 + s2
             if abs(area) < tiny:
                 area = tiny
-            w0 = edges[6] / area / depth[tri[n, 0]]
-            w1 = edges[7] / area / depth[tri[n, 1]]
-            w2 = edges[8] / area / depth[tri[n, 2]]
+            w0 = s0 / area / depth[i0]
+            w1 = s1 / area / depth[i1]
+            w2 = s2 / area / depth[i2]
             total = w0 + w1 + w2
             out[n, 0], out[n, 1], out[n, 2] = w0 / total, w1 / total, w2 / total
 
     @_serial_and_parallel
-    def _barycentrics_backward(pixels, depth, tri, centres, tiny, grad, grad_p, grad_z):
+    def _barycentrics_backward(pixels, depth, triangles, tri, flat, centres, width, tiny, grad, grad_p, grad_z):
         """Gradients to each pixel's corners: grad_p [N, 3, 2], grad_z [N, 3] (reciprocals: few divisions)."""
         for n in prange(grad.shape[0]):
-            edges = _edge_functions(pixels, tri, centres, n)
-            area = edges[6] + edges[7] + edges[8]
+            edges = _edge_functions(pixels, triangles, tri, flat, centres, width, n)
+            d_x, d_y, s = edges[3:6], edges[6:9], edges[9:12]
+            area = s[0] + s[1] + s[2]
             degenerate = abs(area) < tiny
             if degenerate:
                 area = tiny
             inv_area = 1.0 / area
-            inv_z = (1.0 / depth[tri[n, 0]], 1.0 / depth[tri[n, 1]], 1.0 / depth[tri[n, 2]])
-            w = (edges[6] * inv_area * inv_z[0], edges[7] * inv_area * inv_z[1], edges[8] * inv_area * inv_z[2])
+            inv_z = (1.0 / depth[edges[0]], 1.0 / depth[edges[1]], 1.0 / depth[edges[2]])
+            w = (s[0] * inv_area * inv_z[0], s[1] * inv_area * inv_z[1], s[2] * inv_area * inv_z[2])
             inv_total = 1.0 / (w[0] + w[1] + w[2])
             mean = (grad[n, 0] * w[0] + grad[n, 1] * w[1] + grad[n, 2] * w[2]) * inv_total
             grad_area = 0.0
@@ -560,16 +577,16 @@ if numba is not None:
             for i in range(3):  # s_i = d_j.x d_k.y - d_j.y d_k.x
                 j, k = (i + 1) % 3, (i + 2) % 3
                 g = (grad[n, i] - mean) * inv_total * inv_area * inv_z[i] + grad_area
-                grad_p[n, j, 0] += g * edges[3 + k]
-                grad_p[n, j, 1] -= g * edges[k]
-                grad_p[n, k, 0] -= g * edges[3 + j]
-                grad_p[n, k, 1] += g * edges[j]
+                grad_p[n, j, 0] += g * d_y[k]
+                grad_p[n, j, 1] -= g * d_x[k]
+                grad_p[n, k, 0] -= g * d_y[j]
+                grad_p[n, k, 1] += g * d_x[j]
 
     @njit(cache=True)
-    def _scatter_corners(tri, grad_p, grad_z, grad_pixels, grad_depth):
+    def _scatter_corners(triangles, tri, grad_p, grad_z, grad_pixels, grad_depth):
         for n in range(tri.shape[0]):  # serial, pixel order: vertices are shared between pixels
             for i in range(3):
-                v = tri[n, i]
+                v = triangles[tri[n], i]
                 grad_pixels[v, 0] += grad_p[n, i, 0]
                 grad_pixels[v, 1] += grad_p[n, i, 1]
                 grad_depth[v] += grad_z[n, i]

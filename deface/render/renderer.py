@@ -546,11 +546,11 @@ def _renumber(corners: torch.Tensor, num_vertices: int) -> tuple[torch.Tensor, t
 def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor) -> torch.Tensor:
     """Perspective-correct barycentrics [N, 3] of the pixel centres ``covered`` in triangles ``tri``."""
     pixels, depth = camera.project(mesh.vertices)  # [V, 2], [V]
-    corners = mesh.triangles.index_select(0, tri)  # [N, 3]
     width = camera.width
-    q = torch.stack([covered % width, covered // width], -1).to(pixels.dtype) + 0.5  # [N, 2]
     if kernels.enabled(pixels, depth) and pixels.dtype == depth.dtype:
-        return _KernelBarycentrics.apply(pixels, depth, corners, q)
+        return _KernelBarycentrics.apply(pixels, depth, (mesh.triangles, tri, covered, (camera.height, width)))
+    corners = mesh.triangles.index_select(0, tri)  # [N, 3]
+    q = torch.stack([covered % width, covered // width], -1).to(pixels.dtype) + 0.5  # [N, 2]
     flat = corners.reshape(-1)
     p = pixels.index_select(0, flat).reshape(-1, 3, 2)  # [N, 3, 2]
     z = depth.index_select(0, flat).reshape(-1, 3)  # [N, 3]
@@ -568,17 +568,19 @@ def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.
 
 
 class _KernelBarycentrics(torch.autograd.Function):
-    """The numba path of ``_barycentrics``: projected vertices [V, 2], their depths [V], triangle corners
-    [N, 3] and pixel centres [N, 2]; the corners are gathered (and their gradients scattered) in the kernels."""
+    """The numba path of ``_barycentrics``: projected vertices [V, 2], their depths [V], and the pixels =
+    (triangles [F, 3], triangle id [N] and flat index [N] of each covered pixel, image (H, W)); corners and
+    pixel centres are looked up (and the corner gradients scattered) in the kernels."""
 
     @staticmethod
-    def forward(ctx, pixels, depth, corners, centres):
-        ctx.save_for_backward(pixels, depth, corners, centres)
-        return kernels.barycentrics_forward(pixels, depth, corners, centres)
+    def forward(ctx, pixels, depth, covered):
+        ctx.save_for_backward(pixels, depth)
+        ctx.covered = covered
+        return kernels.barycentrics_forward(pixels, depth, covered)
 
     @staticmethod
     def backward(ctx, grad):
-        return (*kernels.barycentrics_backward(*ctx.saved_tensors, grad), None, None)
+        return (*kernels.barycentrics_backward(*ctx.saved_tensors, ctx.covered, grad), None)
 
 
 def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
