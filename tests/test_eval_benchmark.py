@@ -70,3 +70,11 @@ def test_benchmark_smoke_run_writes_metrics_and_tables(photos, tmp_path):
     text = report.read_text()
     assert "kept text" in text and text.count("## Texture recovery") == 1
     assert "| Ours (default preset) |" in text and "| NextFace* | not run" in text
+    # A row whose cached fits used another configuration is not reported as if it were current.
+    stale_nextface = out / "nextface" / "one" / "scores.json"
+    stale = json.loads(stale_nextface.read_text())
+    stale["config"]["seed"] += 1
+    stale_nextface.write_text(json.dumps(stale))
+    section = report_markdown(out, tmp_path / "pairs", "smoke", "deface bench run ...")
+    assert "| NextFace | not run with the current configuration" in section
+    assert "| Ours (default preset) | not run" not in section

@@ -137,10 +137,19 @@ def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
     (out_dir / name / "timing.json").write_text(json.dumps({"seconds_per_fit": seconds}))
 
 
-def _row(out_dir: Path, label: str, name: str) -> str:
+def _fitted_now(out_dir: Path, name: str, schedule: str, pairs: list[Pair]) -> bool:
+    """Whether every pair's cached scores were fitted with the variant's current configuration."""
+    config = _as_json(variant_config(VARIANTS[name], schedule))
+    files = [out_dir / name / pair.name / "scores.json" for pair in pairs]
+    return all(f.exists() and json.loads(f.read_text()).get("config") == config for f in files)
+
+
+def _row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair]) -> str:
     path = out_dir / name / "metrics.json"
     if not path.exists():
         return f"| {label} | not run | | | | | | | |"
+    if not _fitted_now(out_dir, name, schedule, pairs):
+        return f"| {label} | not run with the current configuration | | | | | | | |"
     mean = json.loads(path.read_text())["mean"]
     target, source = mean["target"], mean["source"]
     seconds = json.loads((out_dir / name / "timing.json").read_text())["seconds_per_fit"]
@@ -175,7 +184,8 @@ def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str,
     header = ("| | PSNR face | SSIM face | LPIPS face | PSNR full | SSIM full | LPIPS full | src PSNR face | ID dist"
               " | s/fit |\n|---|---|---|---|---|---|---|---|---|---|")
     for title, rows in TABLES:
-        lines += [f"### {title}", "", header] + [_row(out_dir, label, name) for label, name in rows] + [""]
+        table = [_row(out_dir, label, name, schedule, pairs) for label, name in rows]
+        lines += [f"### {title}", "", header, *table, ""]
     lines.append(f"_Written {time.strftime('%Y-%m-%d %H:%M')}._")
     return "\n".join(lines) + "\n"
 
