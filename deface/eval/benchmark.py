@@ -90,15 +90,15 @@ def _run_pair(task: tuple) -> tuple[str, str, float]:
     cached = folder / "scores.json"
     config = variant_config(VARIANTS[variant_name], schedule)
     # Reuse only scores fitted with this very configuration: a changed default or schedule refits.
-    if cached.exists() and json.loads(cached.read_text()).get("config") == _as_json(config):
+    if cached.exists() and json.loads(cached.read_text()).get("config") == config_json(config):
         return variant_name, pair.name, json.loads(cached.read_text())["seconds_per_fit"]
     outcome = evaluate_pair(pair, config, folder, models_dir)
     cached.write_text(json.dumps({"source": outcome.scores.source, "target": outcome.scores.target,
-                                  "seconds_per_fit": outcome.seconds_per_fit, "config": _as_json(config)}, indent=1))
+                                  "seconds_per_fit": outcome.seconds_per_fit, "config": config_json(config)}, indent=1))
     return variant_name, pair.name, outcome.seconds_per_fit
 
 
-def _as_json(config: FitConfig) -> dict:
+def config_json(config: FitConfig) -> dict:
     """The configuration as it reads back from JSON (tuples become lists), for cache comparison."""
     return json.loads(json.dumps(to_dict(config)))
 
@@ -139,7 +139,7 @@ def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
 
 def _fitted_now(out_dir: Path, name: str, schedule: str, pairs: list[Pair]) -> bool:
     """Whether every pair's cached scores were fitted with the variant's current configuration."""
-    config = _as_json(variant_config(VARIANTS[name], schedule))
+    config = config_json(variant_config(VARIANTS[name], schedule))
     files = [out_dir / name / pair.name / "scores.json" for pair in pairs]
     return all(f.exists() and json.loads(f.read_text()).get("config") == config for f in files)
 
