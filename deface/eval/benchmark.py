@@ -89,9 +89,9 @@ def _run_pair(task: tuple) -> tuple[str, str, float]:
     folder = Path(out_dir) / variant_name / pair.name
     cached = folder / "scores.json"
     config = variant_config(VARIANTS[variant_name], schedule)
-    # Reuse only scores fitted with this very configuration: a changed default or schedule refits.
-    if cached.exists() and json.loads(cached.read_text()).get("config") == config_json(config):
-        return variant_name, pair.name, json.loads(cached.read_text())["seconds_per_fit"]
+    scores = _cached_scores(cached, config)
+    if scores is not None:
+        return variant_name, pair.name, scores["seconds_per_fit"]
     outcome = evaluate_pair(pair, config, folder, models_dir)
     cached.write_text(json.dumps({"source": outcome.scores.source, "target": outcome.scores.target,
                                   "seconds_per_fit": outcome.seconds_per_fit, "config": config_json(config)}, indent=1))
@@ -101,6 +101,14 @@ def _run_pair(task: tuple) -> tuple[str, str, float]:
 def config_json(config: FitConfig) -> dict:
     """The configuration as it reads back from JSON (tuples become lists), for cache comparison."""
     return json.loads(json.dumps(to_dict(config)))
+
+
+def _cached_scores(path: Path, config: FitConfig) -> dict | None:
+    """A pair's cached scores if they were fitted with this very configuration (a changed default refits)."""
+    if not path.exists():
+        return None
+    scores = json.loads(path.read_text())
+    return scores if scores.get("config") == config_json(config) else None
 
 
 def run_benchmark(pairs_dir: Path, out_dir: Path, variants: list[str], schedule: str = "quick",
@@ -139,9 +147,8 @@ def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
 
 def _fitted_now(out_dir: Path, name: str, schedule: str, pairs: list[Pair]) -> bool:
     """Whether every pair's cached scores were fitted with the variant's current configuration."""
-    config = config_json(variant_config(VARIANTS[name], schedule))
-    files = [out_dir / name / pair.name / "scores.json" for pair in pairs]
-    return all(f.exists() and json.loads(f.read_text()).get("config") == config for f in files)
+    config = variant_config(VARIANTS[name], schedule)
+    return all(_cached_scores(out_dir / name / pair.name / "scores.json", config) is not None for pair in pairs)
 
 
 def _row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair]) -> str:
