@@ -72,9 +72,8 @@ def frame_geometry(model: FaceModel, scene: SceneParameters, topology: dict, fra
 
 
 def topology_tensors(model: FaceModel) -> dict:
-    # Row-major once here: the renderer gathers triangle corners row by row every step (ICT's are column-major).
     return {
-        "triangles": torch.as_tensor(model.triangles, dtype=torch.long).contiguous(),
-        "uvs": torch.as_tensor(model.uvs, dtype=torch.float32).contiguous(),
-        "triangle_uvs": torch.as_tensor(model.triangle_uvs, dtype=torch.long).contiguous(),
+        "triangles": torch.as_tensor(model.triangles, dtype=torch.long),
+        "uvs": torch.as_tensor(model.uvs, dtype=torch.float32),
+        "triangle_uvs": torch.as_tensor(model.triangle_uvs, dtype=torch.long),
     }

@@ -25,7 +25,8 @@ def quads_to_triangles(faces: np.ndarray) -> np.ndarray:
     first = faces[:, [0, 1, 2]]
     quads = faces[faces[:, 3] >= 0]
     second = quads[:, [0, 2, 3]]
-    return np.concatenate([first, second]).astype(np.int64)
+    # row-major: the renderer gathers triangle corners row by row every step
+    return np.ascontiguousarray(np.concatenate([first, second]), dtype=np.int64)
 
 
 def _key(models_dir: str | os.PathLike | None) -> str | None:
