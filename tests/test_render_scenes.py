@@ -7,9 +7,11 @@ import math
 import numpy as np
 import torch
 
+from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import Textures
 from deface.render.primitives import grid_plane, uv_sphere
+from deface.render.raycast import RayScene
 from deface.render.renderer import RenderConfig, Renderer
 from deface.render.sh import sh_basis
 
@@ -138,11 +140,40 @@ def test_convex_sphere_has_no_self_shadow_and_constant_light_gives_albedo():
     # constant radiance L: diffuse albedo * L + specular k_s * L, for any roughness
     sh = torch.zeros(1, 9, 3, dtype=torch.float64)
     sh[0, 0] = 2.0 * math.sqrt(4 * math.pi)
-    textures = Textures.constant(4, diffuse=(0.3, 0.5, 0.7), specular=(0.1, 0.2, 0.05), roughness=0.3,
-                                 dtype=torch.float64)
+    textures = Textures.constant(
+        4, diffuse=(0.3, 0.5, 0.7), specular=(0.1, 0.2, 0.05), roughness=0.3, dtype=torch.float64
+    )
     out = renderer.render(sphere, camera(), textures, sh, transfer)
     expected = 2.0 * (torch.tensor([0.3, 0.5, 0.7]) + torch.tensor([0.1, 0.2, 0.05])).double()
     covered = out.mask > 0
-    np.testing.assert_allclose(out.images[0][covered].numpy(), expected.expand(int(covered.sum()), 3).numpy(),
-                               rtol=1e-6)
+    np.testing.assert_allclose(
+        out.images[0][covered].numpy(), expected.expand(int(covered.sum()), 3).numpy(), rtol=1e-6
+    )
     assert torch.all(out.images[0][~covered] == 0)
+
+
+def test_ray_batches_split_across_threads_give_the_single_thread_answers():
+    """Embree batches are traced in chunks on several threads; every query answers as on one thread."""
+    sphere = uv_sphere(1.0, 24, 48)
+    scene = RayScene(sphere.vertices.numpy(), sphere.triangles.numpy())
+    gen = np.random.default_rng(0)
+    origins = gen.normal(size=(20000, 3)) * 3.0
+    directions = -origins + gen.normal(size=origins.shape)  # roughly towards the sphere: hits and misses
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    answers = {}
+    for threads in (1, 3):
+        kernels.set_threads(threads)
+        try:
+            answers[threads] = (
+                scene.first_triangles(origins, directions),
+                *scene.intersect(origins, directions),
+                scene.occluded(origins, directions),
+            )
+        finally:
+            kernels.set_threads(None)
+    first, distance = answers[1][0], answers[1][2]
+    assert 0.2 < (first >= 0).mean() < 0.95  # both hits and misses
+    hits = origins + distance[:, None] * directions  # on the tessellated unit sphere
+    np.testing.assert_allclose(np.linalg.norm(hits[first >= 0], axis=1), 1.0, atol=0.02)
+    for one, several in zip(answers[1], answers[3], strict=True):
+        np.testing.assert_array_equal(one, several)

@@ -82,7 +82,8 @@ _threads = _thread_setting()
 
 
 def set_threads(count: int | None) -> None:
-    """Threads of the numba kernels; None (the default) follows ``torch.get_num_threads()``.
+    """Threads of the numba kernels and of Embree's primary and shadow rays; None (the default) follows
+    ``torch.get_num_threads()``.
 
     The renderer's time is mostly in these kernels, so e.g. 2 kernel threads with 1 torch thread keep
     torch's small ops free of thread hand-offs while the pixel passes run on both cores. The environment
@@ -94,12 +95,18 @@ def set_threads(count: int | None) -> None:
     _threads = count
 
 
+def thread_count() -> int:
+    """Threads the renderer's CPU loops use: the numba kernels and the Embree ray batches (raycast.py)."""
+    threads = torch.get_num_threads() if _threads is None else _threads
+    return threads if numba is None else min(threads, numba.config.NUMBA_NUM_THREADS)
+
+
 def _pick(kernel):
     """The serial or the parallel compilation of ``kernel`` for the thread setting (``set_threads``).
 
     With 1 thread the serial build runs on the calling thread (no thread pool at all).
     """
-    threads = min(torch.get_num_threads() if _threads is None else _threads, numba.config.NUMBA_NUM_THREADS)
+    threads = thread_count()
     if threads <= 1:
         return kernel.serial
     numba.set_num_threads(threads)
@@ -369,8 +376,10 @@ def shade_backward(plain, bands_v, uvs, bary, textures, pixels, width, grads, ne
         np.zeros(texture.shape if need else (0, 0, texture.shape[2]), dtype=dtype)
         for texture, need in zip(arrays[4:], need_textures, strict=True)
     ]
-    if any(need_textures):  # one serial pass for the three maps (they share the texel set-up)
-        _scatter_texel_grads(arrays[2], arrays[3], uv_corners, grad_texels, arrays[4].shape[:2], tuple(texture_grads))
+    if any(need_textures):  # one pass for the three maps (they share the texel set-up)
+        _pick(_scatter_texel_grads)(
+            arrays[2], arrays[3], uv_corners, grad_texels, arrays[4].shape[:2], tuple(texture_grads), thread_count()
+        )
     texture_grads = [torch.from_numpy(g) if g.size else None for g in texture_grads]
     grad_vertex, grad_bands = _sum_parts(grad_plain), _sum_parts(grad_bands).reshape(used, bands, channels)
     return torch.from_numpy(grad_vertex), torch.from_numpy(grad_bands), torch.from_numpy(grad_bary), texture_grads
@@ -763,28 +772,38 @@ if numba is not None:
         t00, t01, t10, t11 = texels
         return (t01 - t00) * (1.0 - fy) + (t11 - t10) * fy, (t10 - t00) * (1.0 - fx) + (t11 - t01) * fx
 
-    @njit(cache=True)
-    def _scatter_texel_grads(uvs, bary, uv_corners, grad_texels, size, grad_maps):
+    @_serial_and_parallel
+    def _scatter_texel_grads(uvs, bary, uv_corners, grad_texels, size, grad_maps, row_ranges):
         """Bilinear scatter of grad_texels [N, 7] (diffuse, specular, roughness columns) into the maps' gradients
-        ``grad_maps`` (3 arrays [Ht, Wt, C]; empty ones are skipped), serial in pixel order (texels are shared)."""
+        ``grad_maps`` (3 arrays [Ht, Wt, C]; empty ones are skipped). Texel rows are split into ``row_ranges``
+        ranges, one per thread; each scans the pixels in order and adds only to its own rows, so every texel
+        sums its pixels in pixel order whatever the number of ranges (texels are shared between pixels)."""
         height, width = size
-        for p in range(bary.shape[0]):
-            u, v = _uv_at(uvs, bary, uv_corners, p)
-            x0, fx, _ = _texel_axis(u, width)
-            y0, fy, _ = _texel_axis(1.0 - v, height)
-            x1, y1 = min(x0 + 1, width - 1), min(y0 + 1, height - 1)
-            column = 0
-            for m in range(len(grad_maps)):
-                grad_map = grad_maps[m]
-                channels = grad_map.shape[2]
-                if grad_map.shape[0] > 0:
-                    for c in range(channels):
-                        g = grad_texels[p, column + c]
-                        grad_map[y0, x0, c] += g * (1.0 - fx) * (1.0 - fy)
-                        grad_map[y0, x1, c] += g * fx * (1.0 - fy)
-                        grad_map[y1, x0, c] += g * (1.0 - fx) * fy
-                        grad_map[y1, x1, c] += g * fx * fy
-                column += channels
+        for part in prange(row_ranges):
+            first, last = part * height // row_ranges, (part + 1) * height // row_ranges
+            for p in range(bary.shape[0]):
+                u, v = _uv_at(uvs, bary, uv_corners, p)
+                y0, fy, _ = _texel_axis(1.0 - v, height)
+                y1 = min(y0 + 1, height - 1)
+                top, bottom = first <= y0 < last, first <= y1 < last
+                if not (top or bottom):
+                    continue
+                x0, fx, _ = _texel_axis(u, width)
+                x1 = min(x0 + 1, width - 1)
+                column = 0
+                for m in range(len(grad_maps)):
+                    grad_map = grad_maps[m]
+                    channels = grad_map.shape[2]
+                    if grad_map.shape[0] > 0:
+                        for c in range(channels):
+                            g = grad_texels[p, column + c]
+                            if top:
+                                grad_map[y0, x0, c] += g * (1.0 - fx) * (1.0 - fy)
+                                grad_map[y0, x1, c] += g * fx * (1.0 - fy)
+                            if bottom:
+                                grad_map[y1, x0, c] += g * (1.0 - fx) * fy
+                                grad_map[y1, x1, c] += g * fx * fy
+                    column += channels
 
     @njit(inline="always")
     def _uv_at(uvs, bary, uv_corners, p):
