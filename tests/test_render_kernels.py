@@ -9,6 +9,7 @@ from test_render_gradients import Loss
 from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import sample_texture
+from deface.render.primitives import uv_sphere
 from deface.render.renderer import RenderConfig, Renderer, _filtered_interpolation, _specular_bands
 from deface.render.sh import sh_basis_rows
 
@@ -177,3 +178,19 @@ def test_renderer_float32_close_to_reference():
         return [renderer.render(mesh, camera, textures, loss.sh.float()).images]
 
     assert_close(*both_paths(run), rtol=1e-4, atol=1e-5)
+
+
+def test_vertex_normals_follow_in_place_edits_of_the_triangles():
+    """The kernels keep the per-vertex corner lists of the last triangles tensor; after an in-place edit
+    that changes which vertices each triangle uses, values and gradients must still match the reference."""
+    sphere = uv_sphere(1.0, 8, 16)
+    vertices = sphere.vertices.detach().clone()
+
+    def normals_and_grads():
+        return values_and_grads(
+            lambda v: type(sphere)(v, sphere.triangles, sphere.uvs, sphere.triangle_uvs).vertex_normals(), [vertices]
+        )
+
+    normals_and_grads()  # fills the cache for this triangles tensor
+    sphere.triangles[:] = torch.roll(sphere.triangles, 1, dims=0).clone()  # other vertices at each slot
+    assert_close(*both_paths(normals_and_grads))

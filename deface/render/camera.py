@@ -7,8 +7,9 @@ axis-angle (pi, 0, 0) (see :meth:`Camera.frontal`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
@@ -40,6 +41,18 @@ class Camera:
     translation: torch.Tensor
     width: int
     height: int
+    _matrix: torch.Tensor | None = field(default=None, init=False, repr=False, compare=False)
+    """The rotation matrix computed once by ``resolved`` (None: computed on each use)."""
+
+    def resolved(self) -> Camera:
+        """This camera with its rotation matrix computed once, for the calls of one render: the ~6 uses of
+        the matrix in a render then share one Rodrigues evaluation (and one backward through it). Not kept
+        across steps: the matrix belongs to the autograd graph and the rotation it was computed from."""
+        if self._matrix is not None:
+            return self
+        camera = dataclasses.replace(self)
+        object.__setattr__(camera, "_matrix", axis_angle_to_matrix(self.rotation))
+        return camera
 
     @staticmethod
     def frontal(width: int, height: int, distance: float = 60.0, fov_degrees: float = 20.0) -> Camera:
@@ -55,7 +68,7 @@ class Camera:
 
     @property
     def rotation_matrix(self) -> torch.Tensor:  # [3, 3]
-        return axis_angle_to_matrix(self.rotation)
+        return axis_angle_to_matrix(self.rotation) if self._matrix is None else self._matrix
 
     def to_camera(self, points: torch.Tensor) -> torch.Tensor:
         """Model-frame points [..., 3] -> camera-frame points [..., 3]."""

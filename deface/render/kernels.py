@@ -257,7 +257,7 @@ def sh_band_sums_backward(directions, coeffs, grad, constants, need_directions: 
 def vertex_normals_forward(vertices: torch.Tensor, triangles: torch.Tensor) -> torch.Tensor:
     """Mesh.vertex_normals: unit sums of the incident faces' cross products, vertices [V, 3] -> [V, 3]."""
     verts, tris = _array(vertices), _array(triangles)
-    offsets, slots = _corners_by_vertex(tris, verts.shape[0])
+    offsets, slots = _incident_corners(triangles, verts.shape[0])
     out = np.empty(verts.shape, dtype=verts.dtype)
     _pick(_vertex_normals)(verts, tris, offsets, slots, out)
     return torch.from_numpy(out)
@@ -266,11 +266,26 @@ def vertex_normals_forward(vertices: torch.Tensor, triangles: torch.Tensor) -> t
 def vertex_normals_backward(vertices: torch.Tensor, triangles: torch.Tensor, grad: torch.Tensor) -> torch.Tensor:
     """Gradient of ``vertex_normals_forward`` to the vertices [V, 3], gathered per vertex (deterministic)."""
     verts, tris = _array(vertices), _array(triangles)
-    offsets, slots = _corners_by_vertex(tris, verts.shape[0])
+    offsets, slots = _incident_corners(triangles, verts.shape[0])
     out = np.empty(verts.shape, dtype=verts.dtype)
     grad_sum = np.empty(verts.shape)  # d loss / d (unnormalised sum of face normals) per vertex
     _pick(_vertex_normals_vjp)(verts, tris, offsets, slots, _array(grad), grad_sum, out)
     return torch.from_numpy(out)
+
+
+_incident_cache: tuple | None = None
+
+
+def _incident_corners(triangles: torch.Tensor, num_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """``_corners_by_vertex`` of a mesh's triangles, kept for the last triangles tensor: a fit renders one
+    topology thousands of times. The cache holds the tensor itself (so its memory cannot be reused by
+    another) and its in-place version counter."""
+    global _incident_cache
+    cached = _incident_cache
+    if cached is None or cached[0] is not triangles or cached[1:3] != (triangles._version, num_vertices):
+        incident = _corners_by_vertex(_array(triangles), num_vertices)
+        cached = _incident_cache = (triangles, triangles._version, num_vertices, incident)
+    return cached[3]
 
 
 # -- mirrored view directions ----------------------------------------------------------------------

@@ -107,6 +107,7 @@ class Renderer:
 
     def rasterize(self, mesh: Mesh, camera: Camera) -> Fragments:
         """Triangle id per pixel by Embree ray casting; perspective-correct barycentrics in torch."""
+        camera = camera.resolved()
         triangle_id = torch.from_numpy(self._cast_primary(mesh, camera))
         return self.fragments_for(mesh, camera, triangle_id.reshape(camera.height, camera.width))
 
@@ -117,6 +118,7 @@ class Renderer:
         Barycentrics are recomputed from ``mesh`` and ``camera``: use it to keep visibility fixed while
         geometry changes slightly (finite differences, several shading passes).
         """
+        camera = camera.resolved()
         height, width = camera.height, camera.width
         if tuple(triangle_id.shape) != (height, width):
             raise ValueError(f"fragments_for: triangle_id must be [{height}, {width}], got {tuple(triangle_id.shape)}")
@@ -190,6 +192,7 @@ class Renderer:
         transfer: ShadowTransfer | None,
     ) -> RenderOutput:
         """Shade covered pixels under every light ``sh_lights`` [K, B², 3]; ``transfer`` None = no shadows."""
+        camera = camera.resolved()
         bands = _bands_of(sh_lights)
         num_lights = sh_lights.shape[0]
         height, width = camera.height, camera.width
@@ -292,6 +295,7 @@ class Renderer:
             transfer = self.cache.get(mesh)
         elif not self.config.shadows:
             transfer = None
+        camera = camera.resolved()
         return self.shade(mesh, camera, self.rasterize(mesh, camera), textures, sh_lights, transfer)
 
 
