@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 from test_render_gradients import Loss
@@ -10,7 +11,7 @@ from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import sample_texture
 from deface.render.primitives import uv_sphere
-from deface.render.renderer import RenderConfig, Renderer, _filtered_interpolation, _specular_bands
+from deface.render.renderer import RenderConfig, Renderer, _filtered_interpolation, _pixel_rays, _specular_bands
 from deface.render.sh import sh_basis_rows
 
 pytestmark = pytest.mark.skipif(kernels.numba is None, reason="numba is not installed")
@@ -194,3 +195,23 @@ def test_vertex_normals_follow_in_place_edits_of_the_triangles():
     normals_and_grads()  # fills the cache for this triangles tensor
     sphere.triangles[:] = torch.roll(sphere.triangles, 1, dims=0).clone()  # other vertices at each slot
     assert_close(*both_paths(normals_and_grads))
+
+
+def test_primary_ray_directions_match_the_numpy_path():
+    """The numba loop building Embree's primary rays gives numpy's unit directions (float32 rounding)."""
+    cam = Camera(
+        focal=torch.tensor(150.0),
+        rotation=torch.tensor([3.0, 0.4, -0.2]),
+        translation=torch.tensor([0.5, -1.0, 40.0]),
+        width=120,
+        height=90,
+    )
+    flat = np.arange(0, 120 * 90, 7)
+
+    def rays():
+        return [torch.from_numpy(np.ascontiguousarray(a)) for a in _pixel_rays(cam, flat)]
+
+    fast, reference = both_paths(rays)
+    torch.testing.assert_close(fast[0], reference[0])
+    torch.testing.assert_close(fast[1], reference[1], rtol=0, atol=1e-6)
+    torch.testing.assert_close(fast[1].norm(dim=1), torch.ones(len(flat)), rtol=0, atol=1e-6)

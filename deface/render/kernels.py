@@ -335,6 +335,14 @@ def triangle_box_pixels(pixels: torch.Tensor, triangles: torch.Tensor, height: i
     return np.flatnonzero(mask)
 
 
+def pixel_directions(flat: np.ndarray, size: tuple[int, int], focal: float, rotation: np.ndarray) -> np.ndarray:
+    """renderer._pixel_rays' unit model-frame directions [N, 3] (float32) through the centres of the pixels
+    ``flat`` (y * W + x) of an image size = (H, W), for a camera of ``focal`` (pixels) and rotation [3, 3]."""
+    out = np.empty((flat.shape[0], 3), dtype=np.float32)
+    _pixel_directions(np.ascontiguousarray(flat, dtype=np.int64), size[0], size[1], focal, rotation, out)
+    return out
+
+
 # -- fused pixel shading ----------------------------------------------------------------------------
 SCREEN_CHANNELS = (2, 3, 1, 3, 3, 1)
 """Channels of the screen buffers ``shade_forward`` writes besides the images: uv, normals, depth,
@@ -1194,6 +1202,17 @@ if numba is not None:
         for n in range(corners.shape[0]):
             for i in range(3):
                 local[n, i] = new_index[corners[n, i]]
+
+    @njit(cache=True)
+    def _pixel_directions(flat, height, width, focal, rotation, out):
+        for n in range(flat.shape[0]):
+            y, x = flat[n] // width, flat[n] % width
+            cx, cy = (x + 0.5 - width / 2) / focal, (y + 0.5 - height / 2) / focal  # camera frame, z = 1
+            dx = cx * rotation[0, 0] + cy * rotation[1, 0] + rotation[2, 0]  # camera -> model: R^T d
+            dy = cx * rotation[0, 1] + cy * rotation[1, 1] + rotation[2, 1]
+            dz = cx * rotation[0, 2] + cy * rotation[1, 2] + rotation[2, 2]
+            norm = np.sqrt(dx * dx + dy * dy + dz * dz)
+            out[n, 0], out[n, 1], out[n, 2] = dx / norm, dy / norm, dz / norm
 
     @njit(cache=True)
     def _mark_triangle_boxes(pixels, triangles, mask):

@@ -158,12 +158,10 @@ class Renderer:
         if in_front and kernels.enabled(pixels):
             # only pixels inside some triangle's projected box (a ray elsewhere cannot hit): ~half as many rays
             flat = kernels.triangle_box_pixels(pixels, mesh.triangles, height, width)
-            ys, xs = np.divmod(flat, width)
         else:
             ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
-            ys, xs = ys.reshape(-1), xs.reshape(-1)
-            flat = ys * width + xs
-        origins, directions = _pixel_rays(camera, xs + 0.5, ys + 0.5)
+            flat = (ys * width + xs).reshape(-1)
+        origins, directions = _pixel_rays(camera, flat)
         triangle_id[flat] = self.ray_scene(mesh).first_triangles(origins, directions)
         return triangle_id
 
@@ -596,20 +594,22 @@ def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor
     return out + values.index_select(0, corners[:, 2]) * bary[:, 2:3]
 
 
-def _pixel_rays(camera: Camera, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Model-frame rays through pixel positions (x right, y down): origins [N, 3], unit directions [N, 3].
-
-    float32, Embree's precision: the directions are built in it directly (no float64 copies).
-    """
+def _pixel_rays(camera: Camera, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Model-frame rays through the centres of the pixels ``flat`` (y * W + x; x right, y down): origins
+    [N, 3], unit directions [N, 3], in float32, Embree's precision (a numba loop on the fast path)."""
     focal = float(camera.focal.detach())
-    dirs_cam = np.empty((xs.shape[0], 3), dtype=np.float32)
-    dirs_cam[:, 0] = (xs - camera.width / 2) / focal
-    dirs_cam[:, 1] = (ys - camera.height / 2) / focal
-    dirs_cam[:, 2] = 1.0
     rot = camera.rotation_matrix.detach().cpu().numpy().astype(np.float32)
+    origin = camera.center_in_model().detach().cpu().numpy().astype(np.float32)
+    if kernels.enabled(camera.focal):
+        dirs = kernels.pixel_directions(flat, (camera.height, camera.width), focal, rot)
+        return np.broadcast_to(origin, dirs.shape), dirs
+    ys, xs = np.divmod(flat, camera.width)
+    dirs_cam = np.empty((xs.shape[0], 3), dtype=np.float32)
+    dirs_cam[:, 0] = (xs + 0.5 - camera.width / 2) / focal
+    dirs_cam[:, 1] = (ys + 0.5 - camera.height / 2) / focal
+    dirs_cam[:, 2] = 1.0
     dirs = dirs_cam @ rot  # camera -> model: R^T d
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    origin = camera.center_in_model().detach().cpu().numpy().astype(np.float32)
     return np.broadcast_to(origin, dirs.shape), dirs
 
 
