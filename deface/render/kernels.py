@@ -211,12 +211,18 @@ def sh_constants(diagonal: list[float], rows: list[tuple[list[float], list[float
     return np.asarray(diagonal, dtype=np.float64), a, b
 
 
+def _constants_as(constants, dtype) -> tuple:
+    """The recurrence constants in the directions' dtype: float32 inputs run the SH loops in float32 (twice
+    the SIMD lanes), like the torch path; float64 stays float64."""
+    return tuple(c.astype(dtype, copy=False) for c in constants)
+
+
 def sh_basis_forward(directions: torch.Tensor, constants, channel_first: bool = True) -> torch.Tensor:
     """Real SH basis (sh.py's convention) at unit directions [N, 3] -> rows [B², N] (or [N, B²])."""
     dirs = _array(directions)
     size = constants[0].shape[0] ** 2
     out = np.empty((size, dirs.shape[0]) if channel_first else (dirs.shape[0], size), dtype=dirs.dtype)
-    _pick(_sh_basis)(dirs, constants, _SH_CHUNK, out, channel_first)
+    _pick(_sh_basis)(dirs, _constants_as(constants, dirs.dtype), _SH_CHUNK, out, channel_first)
     return torch.from_numpy(out)
 
 
@@ -224,7 +230,7 @@ def sh_basis_backward(directions: torch.Tensor, grad: torch.Tensor, constants) -
     """sum_j grad[j, n] dY_j/d(x, y, z)(directions[n]): grad [B², N] -> [N, 3]."""
     dirs = _array(directions)
     out = np.empty(dirs.shape, dtype=dirs.dtype)
-    _pick(_sh_basis_vjp)(dirs, constants, _array(grad), _SH_CHUNK, out)
+    _pick(_sh_basis_vjp)(dirs, _constants_as(constants, dirs.dtype), _array(grad), _SH_CHUNK, out)
     return torch.from_numpy(out)
 
 
@@ -232,7 +238,7 @@ def sh_band_sums_forward(directions: torch.Tensor, coeffs: torch.Tensor, constan
     """Per-band sums S_l(w) = sum_m c_lm Y_lm(w): directions [N, 3], coeffs [B², C] -> [N, B, C]."""
     dirs = _array(directions)
     out = np.empty((dirs.shape[0], constants[0].shape[0], coeffs.shape[1]), dtype=dirs.dtype)
-    _pick(_sh_band_sums)(dirs, _array(coeffs).astype(np.float64), constants, _SH_CHUNK, out)
+    _pick(_sh_band_sums)(dirs, _array(coeffs).astype(dirs.dtype), _constants_as(constants, dirs.dtype), _SH_CHUNK, out)
     return torch.from_numpy(out)
 
 
@@ -242,7 +248,8 @@ def sh_band_sums_backward(directions, coeffs, grad, constants, need_directions: 
     The coefficient gradient (a sum over N) is summed per block of _SH_CHUNK directions, then over the
     blocks in order: the same result for any number of threads.
     """
-    dirs, c = _array(directions), _array(coeffs).astype(np.float64)
+    dirs = _array(directions)
+    c, constants = _array(coeffs).astype(dirs.dtype), _constants_as(constants, dirs.dtype)
     blocks = (dirs.shape[0] + _SH_CHUNK - 1) // _SH_CHUNK
     grad_dirs = np.empty(dirs.shape, dtype=dirs.dtype)
     partial = np.empty((blocks if need_coeffs else 0, c.shape[0], c.shape[1]), dtype=np.float64)
@@ -630,8 +637,15 @@ if numba is not None:
         sh.py (Q_l^m(z) times Re/Im (x+iy)^m), each step run along the block of directions (vectorised)."""
         diagonal, a, b = constants
         bands, chunk = diagonal.shape[0], rows.shape[1]
-        cos_m, sin_m, z = np.empty((bands, chunk)), np.empty((bands, chunk)), np.empty(chunk)
-        q, dq = np.empty((3, bands, chunk)), np.empty((3, bands, chunk))  # bands l, l-1, l-2 in slots l % 3
+        cos_m, sin_m, z = (
+            np.empty((bands, chunk), rows.dtype),
+            np.empty((bands, chunk), rows.dtype),
+            np.empty(chunk, rows.dtype),
+        )
+        q, dq = (
+            np.empty((3, bands, chunk), rows.dtype),
+            np.empty((3, bands, chunk), rows.dtype),
+        )  # bands l, l-1, l-2 in slots l % 3
         for k in range(size):
             z[k] = directions[start + k, 2]
             cos_m[0, k], sin_m[0, k] = 1.0, 0.0
@@ -685,7 +699,7 @@ if numba is not None:
         for block in prange((count + chunk - 1) // chunk):
             start = block * chunk
             size = min(count, start + chunk) - start
-            rows = np.empty((bands * bands, chunk))
+            rows = np.empty((bands * bands, chunk), directions.dtype)
             _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
             if channel_first:
                 for j in range(bands * bands):
@@ -703,9 +717,12 @@ if numba is not None:
         for block in prange((count + chunk - 1) // chunk):
             start = block * chunk
             size = min(count, start + chunk) - start
-            rows, d_rows = np.empty((bands * bands, chunk)), np.empty((3, bands * bands, chunk))
+            rows, d_rows = (
+                np.empty((bands * bands, chunk), directions.dtype),
+                np.empty((3, bands * bands, chunk), directions.dtype),
+            )
             _sh_block_rows(directions, constants, start, size, rows, d_rows, True)
-            totals = np.zeros((3, chunk))
+            totals = np.zeros((3, chunk), directions.dtype)
             for j in range(bands * bands):
                 for axis in range(3):
                     for k in range(size):
@@ -720,7 +737,10 @@ if numba is not None:
         for block in prange((count + chunk - 1) // chunk):
             start = block * chunk
             size = min(count, start + chunk) - start
-            rows, sums = np.empty((bands * bands, chunk)), np.empty((channels, chunk))
+            rows, sums = (
+                np.empty((bands * bands, chunk), directions.dtype),
+                np.empty((channels, chunk), directions.dtype),
+            )
             _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
             for l in range(bands):  # noqa: E741
                 sums[:] = 0.0
@@ -741,10 +761,16 @@ if numba is not None:
         for block in prange((count + chunk - 1) // chunk):
             start = block * chunk
             size = min(count, start + chunk) - start
-            rows, d_rows = np.empty((bands * bands, chunk)), np.empty((3, bands * bands, chunk))
+            rows, d_rows = (
+                np.empty((bands * bands, chunk), directions.dtype),
+                np.empty((3, bands * bands, chunk), directions.dtype),
+            )
             _sh_block_rows(directions, constants, start, size, rows, d_rows, need_directions)
-            grad_rows, grad_block = np.zeros((3, chunk)), np.empty((channels, chunk))
-            g_basis = np.empty(chunk)
+            grad_rows, grad_block = (
+                np.zeros((3, chunk), directions.dtype),
+                np.empty((channels, chunk), directions.dtype),
+            )
+            g_basis = np.empty(chunk, directions.dtype)
             for l in range(bands):  # noqa: E741
                 for k in range(size):
                     for c in range(channels):
