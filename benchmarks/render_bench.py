@@ -97,7 +97,11 @@ def run(args) -> None:
         raster = timed(lambda: renderer.rasterize(mesh, camera), args.repeats)  # noqa: B023
         forward = timed(lambda: renderer.render(mesh, camera, textures, sh, transfer), args.repeats)  # noqa: B023
 
+        leaves = (mesh.vertices, textures.diffuse, textures.specular, textures.roughness, sh)
+
         def step():
+            for leaf in leaves:  # noqa: B023 - as a fit's optimizer.zero_grad(): fresh gradients, no accumulation
+                leaf.grad = None
             out = renderer.render(mesh, camera, textures, sh, transfer)  # noqa: B023
             out.images.sum().backward()
 

@@ -403,7 +403,7 @@ def shade_backward(plain, bands_v, uvs, bary, textures, pixels, width, grads, ne
     scattered = (grad_plain, grad_bands, grad_texels, grad_bary)
     _pick(_shade_backward)(*arrays, covered, corners, uv_corners, width, given, *outputs, lit, *scattered)
     texture_grads = [
-        np.zeros(texture.shape if need else (0, 0, texture.shape[2]), dtype=dtype)
+        np.empty(texture.shape if need else (0, 0, texture.shape[2]), dtype=dtype)  # zeroed by the scatter
         for texture, need in zip(arrays[4:], need_textures, strict=True)
     ]
     if any(need_textures):  # one pass for the three maps (they share the texel set-up)
@@ -824,12 +824,16 @@ if numba is not None:
     @_serial_and_parallel
     def _scatter_texel_grads(uvs, bary, uv_corners, grad_texels, size, grad_maps, row_ranges):
         """Bilinear scatter of grad_texels [N, 7] (diffuse, specular, roughness columns) into the maps' gradients
-        ``grad_maps`` (3 arrays [Ht, Wt, C]; empty ones are skipped). Texel rows are split into ``row_ranges``
-        ranges, one per thread; each scans the pixels in order and adds only to its own rows, so every texel
-        sums its pixels in pixel order whatever the number of ranges (texels are shared between pixels)."""
+        ``grad_maps`` (3 arrays [Ht, Wt, C], overwritten; empty ones are skipped). Texel rows are split into
+        ``row_ranges`` ranges, one per thread; each zeroes its rows, then scans the pixels in order and adds
+        only to its own rows, so every texel sums its pixels in pixel order whatever the number of ranges
+        (texels are shared between pixels)."""
         height, width = size
         for part in prange(row_ranges):
             first, last = part * height // row_ranges, (part + 1) * height // row_ranges
+            for m in range(len(grad_maps)):
+                if grad_maps[m].shape[0] > 0:
+                    grad_maps[m][first:last] = 0.0
             for p in range(bary.shape[0]):
                 u, v = _uv_at(uvs, bary, uv_corners, p)
                 y0, fy, _ = _texel_axis(1.0 - v, height)
