@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import torch
@@ -55,11 +56,18 @@ class Fragments:
     """What covers each pixel: the triangle from ray casting, barycentrics from torch."""
 
     triangle_id: torch.Tensor  # [H, W] long, -1 on background
-    barycentrics: torch.Tensor  # [H, W, 3] perspective-correct, differentiable; 0 on background
     mask: torch.Tensor  # [H, W] float, 1 where a triangle covers the pixel centre
     covered: torch.Tensor  # [N] long, flat indices (y * W + x) of the covered pixels
-    covered_barycentrics: torch.Tensor  # [N, 3] barycentrics of the covered pixels (same graph)
+    covered_barycentrics: torch.Tensor  # [N, 3] perspective-correct, differentiable
     covered_triangles: torch.Tensor  # [N] long, triangle id of each covered pixel
+
+    @cached_property
+    def barycentrics(self) -> torch.Tensor:
+        """[H, W, 3] image of ``covered_barycentrics`` (same graph), 0 on background; built on first use
+        (shading reads only the covered pixels)."""
+        bary = self.covered_barycentrics
+        full = bary.new_zeros(self.triangle_id.numel(), 3).index_copy(0, self.covered, bary)
+        return full.reshape(*self.triangle_id.shape, 3)
 
 
 @dataclass(frozen=True)
@@ -128,10 +136,8 @@ class Renderer:
         covered = torch.nonzero(flat >= 0)[:, 0]  # [N]
         triangles = flat.index_select(0, covered)  # [N]
         bary = _barycentrics(mesh, camera, triangles, covered)  # [N, 3]
-        full = torch.zeros(height * width, 3, dtype=dtype, device=device).index_copy(0, covered, bary)
         return Fragments(
             triangle_id=tid,
-            barycentrics=full.reshape(height, width, 3),
             mask=(tid >= 0).to(dtype),
             covered=covered,
             covered_barycentrics=bary,
