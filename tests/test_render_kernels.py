@@ -11,7 +11,14 @@ from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import sample_texture
 from deface.render.primitives import uv_sphere
-from deface.render.renderer import RenderConfig, Renderer, _filtered_interpolation, _pixel_rays, _specular_bands
+from deface.render.renderer import (
+    RenderConfig,
+    Renderer,
+    _filtered_interpolation,
+    _pixel_rays,
+    _specular_bands,
+    vertex_irradiance,
+)
 from deface.render.sh import sh_basis_rows
 
 pytestmark = pytest.mark.skipif(kernels.numba is None, reason="numba is not installed")
@@ -215,3 +222,20 @@ def test_primary_ray_directions_match_the_numpy_path():
     torch.testing.assert_close(fast[0], reference[0])
     torch.testing.assert_close(fast[1], reference[1], rtol=0, atol=1e-6)
     torch.testing.assert_close(fast[1].norm(dim=1), torch.ones(len(flat)), rtol=0, atol=1e-6)
+
+
+def test_shadowed_vertex_irradiance_matches_the_reference_path():
+    """The fused irradiance kernel (basis, shadowed transfer, product with the lights) on every vertex,
+    values and gradients to vertices and lights, against the torch path."""
+    loss = Loss()
+
+    def run():
+        def irradiance(vertices, sh):
+            mesh = type(loss.mesh)(vertices, loss.mesh.triangles, loss.mesh.uvs, loss.mesh.triangle_uvs)
+            return vertex_irradiance(mesh, sh, loss.transfer)
+
+        return values_and_grads(irradiance, [loss.mesh.vertices, loss.sh])
+
+    fast, reference = both_paths(run)
+    assert_close(fast, reference)
+    assert float(fast[0].abs().max()) > 0 and float(fast[1].abs().max()) > 0

@@ -260,6 +260,42 @@ def sh_band_sums_backward(directions, coeffs, grad, constants, need_directions: 
     )
 
 
+def sh_irradiance_forward(normals, coeffs, lobe, occluded, subset, constants) -> torch.Tensor:
+    """Shadowed SH irradiance E[u, c] = sum_j (lobe_j Y_j(n_u) - O[subset_u, j]) coeffs[j, c] (renderer.
+    _vertex_irradiance's formula): normals [U, 3], coeffs [B², C], lobe [B²] (A_l per coefficient), occluded
+    [V, B²'] with B²' >= B² (None: nothing occluded), subset [U] long (None: U = V) -> [U, C]."""
+    dirs = _array(normals)
+    args = _irradiance_inputs(dirs, coeffs, lobe, occluded, subset, constants)
+    out = np.empty((dirs.shape[0], coeffs.shape[1]), dtype=dirs.dtype)
+    _pick(_sh_irradiance)(dirs, *args, _SH_CHUNK, out)
+    return torch.from_numpy(out)
+
+
+def sh_irradiance_backward(normals, coeffs, lobe, occluded, subset, grad, constants, need_normals, need_coeffs):
+    """Gradients of ``sh_irradiance_forward`` to the normals [U, 3] and coeffs [B², C] (None where not needed);
+    the coefficient gradient is summed per block of _SH_CHUNK normals, then over the blocks in order."""
+    dirs = _array(normals)
+    args = _irradiance_inputs(dirs, coeffs, lobe, occluded, subset, constants)
+    blocks = (dirs.shape[0] + _SH_CHUNK - 1) // _SH_CHUNK
+    grad_dirs = np.empty(dirs.shape, dtype=dirs.dtype)
+    partial = np.empty((blocks if need_coeffs else 0, *coeffs.shape), dtype=np.float64)
+    _pick(_sh_irradiance_vjp)(dirs, *args, _array(grad), _SH_CHUNK, need_normals, grad_dirs, partial)
+    return (
+        torch.from_numpy(grad_dirs) if need_normals else None,
+        torch.from_numpy(partial.sum(0).astype(dirs.dtype)) if need_coeffs else None,
+    )
+
+
+def _irradiance_inputs(dirs: np.ndarray, coeffs, lobe, occluded, subset, constants) -> tuple:
+    """(coeffs, lobe, occluded [V, B²'] or an empty [0, 0] array, subset or arange(U), constants) as arrays
+    in the normals' dtype for the irradiance kernels."""
+    dtype = dirs.dtype
+    rows = np.zeros((0, 0), dtype=dtype) if occluded is None else _array(occluded).astype(dtype, copy=False)
+    index = np.arange(dirs.shape[0]) if subset is None else _array(subset)
+    as_dtype = (_array(t).astype(dtype, copy=False) for t in (coeffs, lobe))
+    return (*as_dtype, rows, index, _constants_as(constants, dtype))
+
+
 # -- area-weighted vertex normals -------------------------------------------------------------------
 def vertex_normals_forward(vertices: torch.Tensor, triangles: torch.Tensor) -> torch.Tensor:
     """Mesh.vertex_normals: unit sums of the incident faces' cross products, vertices [V, 3] -> [V, 3]."""
@@ -795,6 +831,74 @@ if numba is not None:
                 for k in range(size):
                     for axis in range(3):
                         grad_dirs[start + k, axis] = grad_rows[axis, k]
+
+    @njit(inline="always")
+    def _transfer_rows(rows, lobe, occluded, subset, start, size):
+        """rows[j, k] <- lobe_j Y_j - O[subset[start + k], j]: the shadowed transfer of the block's normals."""
+        shadowed = occluded.shape[0] > 0
+        for k in range(size):
+            vertex = subset[start + k]
+            for j in range(rows.shape[0]):
+                rows[j, k] = lobe[j] * rows[j, k] - (occluded[vertex, j] if shadowed else 0.0)
+
+    @_serial_and_parallel
+    def _sh_irradiance(directions, coeffs, lobe, occluded, subset, constants, chunk, out):
+        bands = constants[0].shape[0]
+        count, channels = directions.shape[0], coeffs.shape[1]
+        for block in prange((count + chunk - 1) // chunk):
+            start = block * chunk
+            size = min(count, start + chunk) - start
+            rows = np.empty((bands * bands, chunk), directions.dtype)
+            sums = np.zeros((channels, chunk), directions.dtype)
+            _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
+            _transfer_rows(rows, lobe, occluded, subset, start, size)
+            for j in range(bands * bands):
+                for c in range(channels):
+                    weight = coeffs[j, c]
+                    for k in range(size):
+                        sums[c, k] += weight * rows[j, k]
+            for k in range(size):
+                for c in range(channels):
+                    out[start + k, c] = sums[c, k]
+
+    @_serial_and_parallel
+    def _sh_irradiance_vjp(
+        directions, coeffs, lobe, occluded, subset, constants, grad, chunk, need_directions, grad_dirs, partial
+    ):
+        bands = constants[0].shape[0]
+        count, channels = directions.shape[0], coeffs.shape[1]
+        for block in prange((count + chunk - 1) // chunk):
+            start = block * chunk
+            size = min(count, start + chunk) - start
+            rows = np.empty((bands * bands, chunk), directions.dtype)
+            d_rows = np.empty((3, bands * bands, chunk), directions.dtype)
+            _sh_block_rows(directions, constants, start, size, rows, d_rows, need_directions)
+            grad_block = np.empty((channels, chunk), directions.dtype)
+            for k in range(size):
+                for c in range(channels):
+                    grad_block[c, k] = grad[start + k, c]
+            if need_directions:  # d loss / d n = sum_j lobe_j (sum_c coeffs[j, c] grad[c]) dY_j / dn
+                grad_rows, g_basis = np.zeros((3, chunk), directions.dtype), np.empty(chunk, directions.dtype)
+                for j in range(bands * bands):
+                    g_basis[:] = 0.0
+                    for c in range(channels):
+                        weight = coeffs[j, c] * lobe[j]
+                        for k in range(size):
+                            g_basis[k] += weight * grad_block[c, k]
+                    for axis in range(3):
+                        for k in range(size):
+                            grad_rows[axis, k] += g_basis[k] * d_rows[axis, j, k]
+                for k in range(size):
+                    for axis in range(3):
+                        grad_dirs[start + k, axis] = grad_rows[axis, k]
+            if partial.shape[0] > 0:  # this block's share of d loss / d coeffs[j, c] = sum_k T_j(k) grad[k, c]
+                _transfer_rows(rows, lobe, occluded, subset, start, size)
+                for j in range(bands * bands):
+                    for c in range(channels):
+                        total = 0.0
+                        for k in range(size):
+                            total += rows[j, k] * grad_block[c, k]
+                        partial[block, j, c] = total
 
     @njit(inline="always")
     def _bilinear_setup(uv0, uv1, height, width):

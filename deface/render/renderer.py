@@ -27,7 +27,13 @@ from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures, sample_textures
 from deface.render.raycast import RayScene
-from deface.render.sh import cosine_lobe_coefficients, phong_lobe_filter, sh_band_sums, sh_basis_rows
+from deface.render.sh import (
+    cosine_lobe_coefficients,
+    kernel_constants,
+    phong_lobe_filter,
+    sh_band_sums,
+    sh_basis_rows,
+)
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 
@@ -327,22 +333,45 @@ def _vertex_irradiance(
     ``subset`` [U] (long) are the mesh vertices the normals belong to (None: all V vertices, U = V).
     """
     lobe = cosine_lobe_coefficients(bands).to(coeffs)  # [B²]
+    if transfer is not None:
+        num_vertices = normals.shape[0] if subset is None else None
+        if transfer.bands < bands or (num_vertices is not None and transfer.occluded.shape[0] != num_vertices):
+            raise ValueError(
+                f"shadow transfer has {transfer.bands} bands for {transfer.occluded.shape[0]} vertices, "
+                f"need >= {bands} bands for {normals.shape[0]}"
+            )
+    if kernels.enabled(normals, coeffs) and normals.dtype == coeffs.dtype:
+        occluded = None if transfer is None else transfer.occluded
+        return _KernelIrradiance.apply(normals, coeffs, lobe, occluded, subset)
     # transfer A_l Y_lm(n) - O[lm] per vertex, channel-first [B², U] like the basis rows (mixed layouts make
     # the element-wise ops slow), then one product with the lights: fewer [U, B²] x [B², K*3] products
     # forward and backward than filtering the lights and subtracting a second product
     transfer_rows = sh_basis_rows(normals, bands) * lobe[:, None]  # [B², U]
     if transfer is not None:
         occluded = transfer.occluded_rows  # [B²', V]
-        num_vertices = normals.shape[0] if subset is None else None
-        if transfer.bands < bands or (num_vertices is not None and occluded.shape[1] != num_vertices):
-            raise ValueError(
-                f"shadow transfer has {transfer.bands} bands for {occluded.shape[1]} vertices, "
-                f"need >= {bands} bands for {normals.shape[0]}"
-            )
         if subset is not None:
             occluded = occluded.index_select(1, subset)
         transfer_rows = transfer_rows - occluded[: bands * bands].to(coeffs.dtype)
     return transfer_rows.T @ coeffs
+
+
+class _KernelIrradiance(torch.autograd.Function):
+    """The numba path of ``_vertex_irradiance``: SH basis, shadowed transfer and the product with the lights
+    per block of normals (no [B², U] rows, no serial matmuls); gradients to normals and coeffs."""
+
+    @staticmethod
+    def forward(ctx, normals, coeffs, lobe, occluded, subset):
+        ctx.save_for_backward(normals, coeffs)
+        ctx.inputs = (lobe, occluded, subset, kernel_constants(math.isqrt(lobe.shape[0])))
+        return kernels.sh_irradiance_forward(normals, coeffs, *ctx.inputs)
+
+    @staticmethod
+    def backward(ctx, grad):
+        normals, coeffs = ctx.saved_tensors
+        lobe, occluded, subset, constants = ctx.inputs
+        need = ctx.needs_input_grad[:2]
+        grads = kernels.sh_irradiance_backward(normals, coeffs, lobe, occluded, subset, grad, constants, *need)
+        return *grads, None, None, None
 
 
 class ShadowTransferCache:

@@ -120,7 +120,7 @@ class _SHBasis(torch.autograd.Function):
         ctx.bands, ctx.channel_first = bands, channel_first
         ctx.save_for_backward(directions)
         if kernels.enabled(directions):  # the same recurrences, along blocks of directions
-            return kernels.sh_basis_forward(directions, _kernel_constants(bands), channel_first)
+            return kernels.sh_basis_forward(directions, kernel_constants(bands), channel_first)
         rows = _sh_rows_forward(directions, bands)
         return rows if channel_first else rows.T
 
@@ -129,7 +129,7 @@ class _SHBasis(torch.autograd.Function):
         (directions,) = ctx.saved_tensors
         grad_rows = grad if ctx.channel_first else grad.T  # [B², N]
         if kernels.enabled(directions, grad):
-            return kernels.sh_basis_backward(directions, grad_rows, _kernel_constants(ctx.bands)), None, None
+            return kernels.sh_basis_backward(directions, grad_rows, kernel_constants(ctx.bands)), None, None
         return _sh_rows_vjp(directions, grad_rows, ctx.bands), None, None
 
 
@@ -191,17 +191,18 @@ class _SHBandSums(torch.autograd.Function):
     @staticmethod
     def forward(ctx, directions: torch.Tensor, coeffs: torch.Tensor) -> torch.Tensor:
         ctx.save_for_backward(directions, coeffs)
-        return kernels.sh_band_sums_forward(directions, coeffs, _kernel_constants(math.isqrt(coeffs.shape[0])))
+        return kernels.sh_band_sums_forward(directions, coeffs, kernel_constants(math.isqrt(coeffs.shape[0])))
 
     @staticmethod
     def backward(ctx, grad: torch.Tensor):
         directions, coeffs = ctx.saved_tensors
-        constants = _kernel_constants(math.isqrt(coeffs.shape[0]))
+        constants = kernel_constants(math.isqrt(coeffs.shape[0]))
         return kernels.sh_band_sums_backward(directions, coeffs, grad, constants, *ctx.needs_input_grad)
 
 
 @lru_cache(maxsize=64)
-def _kernel_constants(bands: int):
+def kernel_constants(bands: int):
+    """The SH recurrence constants of ``bands`` bands as the numba kernels take them (kernels.sh_constants)."""
     return kernels.sh_constants(*_recurrence_constants(bands))
 
 
