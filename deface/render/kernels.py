@@ -1050,6 +1050,7 @@ if numba is not None:
         for block in prange((bary.shape[0] + 255) // 256):
             values, summed = np.empty(plain.shape[1], dtype=plain.dtype), np.empty(bands * num_channels)
             lobe, lit = np.empty(bands), np.empty(num_channels)
+            diffuse, specular = np.empty(3), np.empty(3)
             for p in range(block * 256, min(bary.shape[0], (block + 1) * 256)):
                 y, x = covered[p] // width, covered[p] % width
                 u, v, x0, x1, fx, _, y0, y1, fy, _, roughness, _, _ = _pixel_inputs(
@@ -1058,12 +1059,15 @@ if numba is not None:
                 visibility = values[num_channels + 4]
                 lit_out[p, :] = lit
                 for c in range(3):
-                    d = _bilinear_sample(diffuse_map, x0, x1, fx, y0, y1, fy, c)
-                    s = _bilinear_sample(specular_map, x0, x1, fx, y0, y1, fy, c)
-                    diffuse_out[y, x, c], specular_out[y, x, c] = d, s
-                    for k in range(lights):
+                    diffuse[c] = _bilinear_sample(diffuse_map, x0, x1, fx, y0, y1, fy, c)
+                    specular[c] = _bilinear_sample(specular_map, x0, x1, fx, y0, y1, fy, c)
+                    diffuse_out[y, x, c], specular_out[y, x, c] = diffuse[c], specular[c]
+                # lights outside, channels inside: contiguous writes (a channel-outer loop was vectorised
+                # across the lights into gathers and scatters, slow on this CPU)
+                for k in range(lights):
+                    for c in range(3):
                         j = 3 * k + c
-                        images[k, y, x, c] = values[j] * (d / np.pi) + lit[j] * visibility * s
+                        images[k, y, x, c] = values[j] * (diffuse[c] / np.pi) + lit[j] * visibility * specular[c]
                 norm = np.sqrt(
                     values[num_channels] ** 2 + values[num_channels + 1] ** 2 + values[num_channels + 2] ** 2
                 )
@@ -1115,6 +1119,7 @@ if numba is not None:
             # d loss / d summed[l*C + j] = lobe_l g_lit_j, and the same times l² (for d lobe / d exponent)
             g_summed, g_summed_l2 = np.empty(row), np.empty(row)
             spec_bary = np.empty(3)  # d loss / d bary through the specular band sums
+            diffuse_pi, specular, g_irradiance, g_specular_c = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
             for p in range(part * num // parts, (part + 1) * num // parts):
                 y, x = covered[p] // width, covered[p] % width
                 _interpolate_row(plain, corners, bary, p, values)
@@ -1128,25 +1133,29 @@ if numba is not None:
                 g_visibility = 0.0
                 d_fx, d_fy = 0.0, 0.0  # d loss / d bilinear fractions, summed over the three maps
                 for c in range(3):
-                    diffuse_texels = _texel_corners(diffuse_map, x0, x1, y0, y1, c)
-                    specular_texels = _texel_corners(specular_map, x0, x1, y0, y1, c)
-                    d_over_pi = _bilinear_mix(diffuse_texels, fx, fy) / np.pi
-                    s = _bilinear_mix(specular_texels, fx, fy)
-                    g_irradiance = 0.0  # sum_k g * irradiance_k, times 1/pi below (one division per channel)
-                    g_s = g_specular[y, x, c] if given[5] else 0.0
+                    diffuse_pi[c] = _bilinear_sample(diffuse_map, x0, x1, fx, y0, y1, fy, c) / np.pi
+                    specular[c] = _bilinear_sample(specular_map, x0, x1, fx, y0, y1, fy, c)
+                    g_irradiance[c] = 0.0  # sum_k g * irradiance_k, times 1/pi below (one division per channel)
+                    g_specular_c[c] = g_specular[y, x, c] if given[5] else 0.0
+                g_lit[:] = 0.0
+                g_values[:num_channels] = 0.0
+                if given[0]:  # lights outside, channels inside: contiguous, no gathers (see _shade_forward)
                     for k in range(lights):
-                        j = 3 * k + c
-                        g = g_images[k, y, x, c] if given[0] else 0.0
-                        g_values[j] = g * d_over_pi
-                        g_irradiance += g * values[j]
-                        g_lit[j] = g * visibility * s
-                        g_visibility += g * lit_saved[p, j] * s
-                        g_s += g * lit_saved[p, j] * visibility
-                    g_d = g_irradiance / np.pi + (g_diffuse[y, x, c] if given[4] else 0.0)
+                        for c in range(3):
+                            j = 3 * k + c
+                            g = g_images[k, y, x, c]
+                            g_values[j] = g * diffuse_pi[c]
+                            g_irradiance[c] += g * values[j]
+                            g_lit[j] = g * visibility * specular[c]
+                            g_visibility += g * lit_saved[p, j] * specular[c]
+                            g_specular_c[c] += g * lit_saved[p, j] * visibility
+                for c in range(3):
+                    g_d = g_irradiance[c] / np.pi + (g_diffuse[y, x, c] if given[4] else 0.0)
+                    g_s = g_specular_c[c]
                     grad_texels[p, c], grad_texels[p, 3 + c] = g_d, g_s
-                    slope_fx, slope_fy = _bilinear_slopes(diffuse_texels, fx, fy)
+                    slope_fx, slope_fy = _bilinear_slopes(_texel_corners(diffuse_map, x0, x1, y0, y1, c), fx, fy)
                     d_fx, d_fy = d_fx + g_d * slope_fx, d_fy + g_d * slope_fy
-                    slope_fx, slope_fy = _bilinear_slopes(specular_texels, fx, fy)
+                    slope_fx, slope_fy = _bilinear_slopes(_texel_corners(specular_map, x0, x1, y0, y1, c), fx, fy)
                     d_fx, d_fy = d_fx + g_s * slope_fx, d_fy + g_s * slope_fy
                 for l in range(bands):  # noqa: E741
                     for j in range(num_channels):
