@@ -122,15 +122,19 @@ class Renderer:
     def rasterize(self, mesh: Mesh, camera: Camera) -> Fragments:
         """Triangle id per pixel by Embree ray casting; perspective-correct barycentrics in torch."""
         camera = camera.resolved()
-        triangle_id = torch.from_numpy(self._cast_primary(mesh, camera))
-        return self.fragments_for(mesh, camera, triangle_id.reshape(camera.height, camera.width))
+        projected = camera.project(mesh.vertices)  # one projection serves the ray boxes and the barycentrics
+        triangle_id = torch.from_numpy(self._cast_primary(mesh, camera, projected))
+        return self.fragments_for(mesh, camera, triangle_id.reshape(camera.height, camera.width), projected)
 
     @staticmethod
-    def fragments_for(mesh: Mesh, camera: Camera, triangle_id: torch.Tensor) -> Fragments:
+    def fragments_for(
+        mesh: Mesh, camera: Camera, triangle_id: torch.Tensor, projected: tuple | None = None
+    ) -> Fragments:
         """Fragments for given per-pixel triangle ids [H, W] (-1 background), no ray casting.
 
-        Barycentrics are recomputed from ``mesh`` and ``camera``: use it to keep visibility fixed while
-        geometry changes slightly (finite differences, several shading passes).
+        Barycentrics are recomputed from ``mesh`` and ``camera`` (or from ``projected`` = camera.project(
+        mesh.vertices) when the caller has it): use it to keep visibility fixed while geometry changes
+        slightly (finite differences, several shading passes).
         """
         camera = camera.resolved()
         height, width = camera.height, camera.width
@@ -141,7 +145,7 @@ class Renderer:
         flat = tid.reshape(-1)
         covered = torch.nonzero(flat >= 0)[:, 0]  # [N]
         triangles = flat.index_select(0, covered)  # [N]
-        bary = _barycentrics(mesh, camera, triangles, covered)  # [N, 3]
+        bary = _barycentrics(mesh, camera, triangles, covered, projected)  # [N, 3]
         return Fragments(
             triangle_id=tid,
             mask=(tid >= 0).to(dtype),
@@ -150,12 +154,11 @@ class Renderer:
             covered_triangles=triangles,
         )
 
-    def _cast_primary(self, mesh: Mesh, camera: Camera) -> np.ndarray:
+    def _cast_primary(self, mesh: Mesh, camera: Camera, projected: tuple) -> np.ndarray:
         """[H*W] triangle ids; only pixels inside the projected bounding box of the mesh (with the numba
-        kernels: of some triangle) are traced."""
+        kernels: of some triangle) are traced. projected = camera.project(mesh.vertices)."""
         height, width = camera.height, camera.width
-        with torch.no_grad():
-            pixels, depth = camera.project(mesh.vertices.detach())
+        pixels, depth = (t.detach() for t in projected)
         triangle_id = np.full(height * width, -1, dtype=np.int64)
         in_front = bool((depth > 0).all())
         if not in_front:  # a vertex behind the camera: the projected box is meaningless
@@ -580,9 +583,10 @@ def _renumber(corners: torch.Tensor, num_vertices: int) -> tuple[torch.Tensor, t
     return used, new_index[corners]
 
 
-def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor) -> torch.Tensor:
-    """Perspective-correct barycentrics [N, 3] of the pixel centres ``covered`` in triangles ``tri``."""
-    pixels, depth = camera.project(mesh.vertices)  # [V, 2], [V]
+def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor, projected=None) -> torch.Tensor:
+    """Perspective-correct barycentrics [N, 3] of the pixel centres ``covered`` in triangles ``tri``
+    (``projected``: camera.project(mesh.vertices) if already computed)."""
+    pixels, depth = camera.project(mesh.vertices) if projected is None else projected  # [V, 2], [V]
     width = camera.width
     if kernels.enabled(pixels, depth) and pixels.dtype == depth.dtype:
         return _KernelBarycentrics.apply(pixels, depth, (mesh.triangles, tri, covered, (camera.height, width)))
