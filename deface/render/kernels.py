@@ -109,7 +109,8 @@ def _pick(kernel):
     threads = thread_count()
     if threads <= 1:
         return kernel.serial
-    numba.set_num_threads(threads)
+    if numba.get_num_threads() != threads:
+        numba.set_num_threads(threads)
     return kernel.parallel
 
 

@@ -234,8 +234,13 @@ def cosine_lobe_coefficients(bands: int) -> torch.Tensor:
     """A_l repeated for each m of band l -> [bands²] float32 (irradiance E(n) = sum A_l c_lm Y_lm(n))."""
     if bands < 1:
         raise ValueError(f"cosine_lobe_coefficients: bands must be >= 1, got {bands}")
-    values = [cosine_lobe_band(l) for l in range(bands) for _ in range(2 * l + 1)]
-    return torch.tensor(values, dtype=torch.float32)
+    return torch.tensor(_cosine_lobe_values(bands), dtype=torch.float32)
+
+
+@lru_cache(maxsize=64)
+def _cosine_lobe_values(bands: int) -> tuple[float, ...]:
+    """A_l per coefficient (computed once per band count: the renderer asks on every call)."""
+    return tuple(cosine_lobe_band(l) for l in range(bands) for _ in range(2 * l + 1))
 
 
 def phong_lobe_filter(roughness: torch.Tensor, bands: int) -> torch.Tensor:
