@@ -457,11 +457,10 @@ _SCATTER_PARTS = 2
 
 
 def _sum_parts(parts: np.ndarray) -> np.ndarray:
-    """parts [P, ...] summed in index order."""
-    total = parts[0]
-    for part in parts[1:]:
-        total += part
-    return total
+    """parts [P, U, ...] summed in index order -> [U, ...] (into parts[0]; rows in parallel)."""
+    flat = parts.reshape(parts.shape[0], parts.shape[1], -1)
+    _pick(_sum_rows)(flat)
+    return parts[0]
 
 
 if numba is not None:
@@ -1049,7 +1048,7 @@ if numba is not None:
         width = images.shape[2]
         flat_bands = bands_v.reshape(bands_v.shape[0], bands * num_channels)
         for block in prange((bary.shape[0] + 255) // 256):
-            values, summed = np.empty(plain.shape[1], dtype=plain.dtype), np.empty(bands * num_channels)
+            values, summed = np.empty(plain.shape[1], plain.dtype), np.empty(bands * num_channels, plain.dtype)
             lobe, lit = np.empty(bands), np.empty(num_channels)
             diffuse, specular = np.empty(3), np.empty(3)
             for p in range(block * 256, min(bary.shape[0], (block + 1) * 256)):
@@ -1204,6 +1203,14 @@ if numba is not None:
                     for k in range(row):
                         grad_bands[part, vertex, k] += weight * g_summed[k]
                     grad_bary[p, i] = total
+
+    @_serial_and_parallel
+    def _sum_rows(parts):
+        """parts[0] += parts[1] + ... (in index order), [P, U, C], one row per iteration."""
+        for u in prange(parts.shape[1]):
+            for k in range(1, parts.shape[0]):
+                for c in range(parts.shape[2]):
+                    parts[0, u, c] += parts[k, u, c]
 
     @njit(inline="always")
     def _texel_corners(texture, x0, x1, y0, y1, c):
