@@ -200,7 +200,7 @@ def barycentrics_backward(pixels, depth, covered, grad) -> tuple[torch.Tensor, t
 
 
 # -- SH band sums ---------------------------------------------------------------------------------
-_SH_CHUNK = 64  # directions per block: the recurrences run along a block (SIMD); its work arrays stay in L1/L2
+_SH_CHUNK = 128  # directions per block: the recurrences run along a block (SIMD); its float32 work arrays stay in L2
 
 
 def sh_constants(diagonal: list[float], rows: list[tuple[list[float], list[float]]]):
