@@ -1,10 +1,10 @@
 """Time one stage-2 or stage-3 step (render K lights + f (+ g) + losses + backward) of a real photo fit.
 
     DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/fit_step_bench.py [PHOTO] [--resolution 256]
-        [--stage 2|3] [--supersampling S]
+        [--stage 2|3] [--supersampling S] [--threads 1]
 
 Prints the median wall and thread-CPU time of a step at the default preset with 1 torch thread (the
-default of `deface fit`): stage 2 before ACE (all n lights); stage 3 with all n lights kept (an upper
+default of `deface fit`; --threads as `deface fit --threads`): stage 2 before ACE (all n lights); stage 3 with all n lights kept (an upper
 bound: ACE usually keeps fewer) at `--supersampling` samples per pixel side.
 """
 
@@ -34,8 +34,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=10)
     parser.add_argument("--stage", type=int, choices=(2, 3), default=2)
     parser.add_argument("--supersampling", type=int, default=None, help="stage 3 (default: the preset's)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (as `deface fit --threads`)")
     args = parser.parse_args()
-    torch.set_num_threads(1)
+    torch.set_num_threads(args.threads)
     config = override(presets.get("default"), resolution=args.resolution)
     if args.supersampling:
         config = override(config, supersampling=args.supersampling)

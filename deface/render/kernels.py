@@ -464,10 +464,15 @@ def _sum_parts(parts: np.ndarray) -> np.ndarray:
 
 
 if numba is not None:
-    # numba's OpenMP layer busy-waits next to torch's own OpenMP threads and slowed torch ops ~10x here;
-    # the workqueue layer does not spin (an explicit NUMBA_THREADING_LAYER still wins).
+    # OpenMP first: the calling thread joins each kernel and the workers stay warm between the ~15 kernels of
+    # a render. workqueue (the fallback where libgomp is missing) parks the calling thread and wakes its
+    # workers for every kernel: 2-thread 256² step 48-53 ms wall median vs 44-45 with OpenMP and 1 torch
+    # thread, 63 vs 32 ms with 2 torch threads (benchmarks/render.md, round 4). An idle OpenMP worker spins
+    # briefly after each kernel; on a machine shared with other jobs NUMBA_THREADING_LAYER=workqueue avoids
+    # that (an explicit NUMBA_THREADING_LAYER always wins). With 1 thread no layer is used at all.
     if "NUMBA_THREADING_LAYER" not in os.environ:
-        numba.config.THREADING_LAYER = "workqueue"
+        numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+        numba.config.THREADING_LAYER = "default"
 
     # reassociation lets LLVM vectorise the channel sums; results stay deterministic for a given build
     _FAST = {"reassoc", "contract"}
