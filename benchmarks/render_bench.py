@@ -10,6 +10,8 @@ peak memory. Usage:
 The machine is shared: the script reports the median and the minimum over repeats, and the load average;
 for the 256² step also the CPU time of the calling thread (stable under load with --threads 1; numba's
 and Embree's worker threads are not in it). ``--kernels torch`` measures the torch reference path.
+``--threads 2`` runs torch and the kernels on both cores of the 2-core target machine (the 50 ms figure in
+benchmarks/render.md); ``--threads 1`` is one core.
 """
 
 from __future__ import annotations

@@ -672,6 +672,21 @@ if numba is not None:
                 grad_depth[v] += grad_z[n, i]
 
     @njit(inline="always")
+    def _accumulate_rows(rows, coeffs, first, last, size, sums):
+        """sums[c, k] += sum_{first <= j < last} coeffs[j, c] rows[j, k] for the block's ``size`` directions."""
+        for j in range(first, last):
+            for c in range(coeffs.shape[1]):
+                weight = coeffs[j, c]
+                for k in range(size):
+                    sums[c, k] += weight * rows[j, k]
+
+    @njit(inline="always")
+    def _block_span(block, chunk, count):
+        """First direction and number of directions of block ``block`` of ``chunk`` among ``count``."""
+        start = block * chunk
+        return start, min(count, start + chunk) - start
+
+    @njit(inline="always")
     def _sh_block_rows(directions, constants, start, size, rows, d_rows, derivative):
         """Y_j (index l*l+l+m) of directions[start : start + size] into the columns 0..size-1 of ``rows``
         [B², chunk], and dY_j/d(x, y, z) into ``d_rows`` [3, B², chunk] if ``derivative``: the recurrences of
@@ -738,8 +753,7 @@ if numba is not None:
         bands = constants[0].shape[0]
         count = directions.shape[0]
         for block in prange((count + chunk - 1) // chunk):
-            start = block * chunk
-            size = min(count, start + chunk) - start
+            start, size = _block_span(block, chunk, count)
             rows = np.empty((bands * bands, chunk), directions.dtype)
             _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
             if channel_first:
@@ -756,8 +770,7 @@ if numba is not None:
         bands = constants[0].shape[0]
         count = directions.shape[0]
         for block in prange((count + chunk - 1) // chunk):
-            start = block * chunk
-            size = min(count, start + chunk) - start
+            start, size = _block_span(block, chunk, count)
             rows, d_rows = (
                 np.empty((bands * bands, chunk), directions.dtype),
                 np.empty((3, bands * bands, chunk), directions.dtype),
@@ -776,8 +789,7 @@ if numba is not None:
         bands = constants[0].shape[0]
         count, channels = directions.shape[0], coeffs.shape[1]
         for block in prange((count + chunk - 1) // chunk):
-            start = block * chunk
-            size = min(count, start + chunk) - start
+            start, size = _block_span(block, chunk, count)
             rows, sums = (
                 np.empty((bands * bands, chunk), directions.dtype),
                 np.empty((channels, chunk), directions.dtype),
@@ -785,11 +797,7 @@ if numba is not None:
             _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
             for l in range(bands):  # noqa: E741
                 sums[:] = 0.0
-                for j in range(l * l, (l + 1) * (l + 1)):
-                    for c in range(channels):
-                        weight = coeffs[j, c]
-                        for k in range(size):
-                            sums[c, k] += weight * rows[j, k]
+                _accumulate_rows(rows, coeffs, l * l, (l + 1) * (l + 1), size, sums)
                 for k in range(size):
                     for c in range(channels):
                         out[start + k, l, c] = sums[c, k]
@@ -800,8 +808,7 @@ if numba is not None:
         count, channels = directions.shape[0], coeffs.shape[1]
         need_coeffs = partial.shape[0] > 0
         for block in prange((count + chunk - 1) // chunk):
-            start = block * chunk
-            size = min(count, start + chunk) - start
+            start, size = _block_span(block, chunk, count)
             rows, d_rows = (
                 np.empty((bands * bands, chunk), directions.dtype),
                 np.empty((3, bands * bands, chunk), directions.dtype),
@@ -851,17 +858,12 @@ if numba is not None:
         bands = constants[0].shape[0]
         count, channels = directions.shape[0], coeffs.shape[1]
         for block in prange((count + chunk - 1) // chunk):
-            start = block * chunk
-            size = min(count, start + chunk) - start
+            start, size = _block_span(block, chunk, count)
             rows = np.empty((bands * bands, chunk), directions.dtype)
             sums = np.zeros((channels, chunk), directions.dtype)
             _sh_block_rows(directions, constants, start, size, rows, rows[None], False)
             _transfer_rows(rows, lobe, occluded, subset, start, size)
-            for j in range(bands * bands):
-                for c in range(channels):
-                    weight = coeffs[j, c]
-                    for k in range(size):
-                        sums[c, k] += weight * rows[j, k]
+            _accumulate_rows(rows, coeffs, 0, bands * bands, size, sums)
             for k in range(size):
                 for c in range(channels):
                     out[start + k, c] = sums[c, k]
@@ -873,8 +875,7 @@ if numba is not None:
         bands = constants[0].shape[0]
         count, channels = directions.shape[0], coeffs.shape[1]
         for block in prange((count + chunk - 1) // chunk):
-            start = block * chunk
-            size = min(count, start + chunk) - start
+            start, size = _block_span(block, chunk, count)
             rows = np.empty((bands * bands, chunk), directions.dtype)
             d_rows = np.empty((3, bands * bands, chunk), directions.dtype)
             _sh_block_rows(directions, constants, start, size, rows, d_rows, need_directions)

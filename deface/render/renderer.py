@@ -337,12 +337,7 @@ def _vertex_irradiance(
     """
     lobe = cosine_lobe_coefficients(bands).to(coeffs)  # [B²]
     if transfer is not None:
-        num_vertices = normals.shape[0] if subset is None else None
-        if transfer.bands < bands or (num_vertices is not None and transfer.occluded.shape[0] != num_vertices):
-            raise ValueError(
-                f"shadow transfer has {transfer.bands} bands for {transfer.occluded.shape[0]} vertices, "
-                f"need >= {bands} bands for {normals.shape[0]}"
-            )
+        _check_transfer(transfer, bands, normals.shape[0] if subset is None else None)
     if kernels.enabled(normals, coeffs) and normals.dtype == coeffs.dtype:
         occluded = None if transfer is None else transfer.occluded
         return _KernelIrradiance.apply(normals, coeffs, lobe, occluded, subset)
@@ -356,6 +351,14 @@ def _vertex_irradiance(
             occluded = occluded.index_select(1, subset)
         transfer_rows = transfer_rows - occluded[: bands * bands].to(coeffs.dtype)
     return transfer_rows.T @ coeffs
+
+
+def _check_transfer(transfer: ShadowTransfer, bands: int, num_vertices: int | None) -> None:
+    """The transfer covers ``bands`` bands and (when given) ``num_vertices`` vertices."""
+    vertices = transfer.occluded.shape[0]
+    if transfer.bands < bands or (num_vertices is not None and vertices != num_vertices):
+        wanted = f"{bands} bands" + ("" if num_vertices is None else f" for {num_vertices} vertices")
+        raise ValueError(f"shadow transfer has {transfer.bands} bands for {vertices} vertices, need >= {wanted}")
 
 
 class _KernelIrradiance(torch.autograd.Function):
