@@ -4,8 +4,8 @@
         [--stage 2|3] [--supersampling S] [--threads 1]
 
 Prints the median wall and thread-CPU time of a step at the default preset with 1 torch thread (the
-default of `deface fit`; --threads as `deface fit --threads`): stage 2 before ACE (all n lights); stage 3 with all n lights kept (an upper
-bound: ACE usually keeps fewer) at `--supersampling` samples per pixel side.
+default of `deface fit`; --threads as `deface fit --threads`): stage 2 before ACE (all n lights); stage 3
+with all n lights kept (an upper bound: ACE usually keeps fewer) at `--supersampling` samples per pixel side.
 """
 
 from __future__ import annotations
