@@ -58,21 +58,6 @@ def _array(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().contiguous().numpy()
 
 
-_workspaces: dict[str, np.ndarray] = {}
-
-
-def _workspace(name: str, shape: tuple, dtype) -> np.ndarray:
-    """A scratch array reused across calls (fresh large buffers cost more in page faults than in use).
-
-    Only for buffers that are consumed inside one kernel call and never returned.
-    """
-    size = int(np.prod(shape))
-    buffer = _workspaces.get(name)
-    if buffer is None or buffer.dtype != dtype or buffer.size < size:
-        buffer = _workspaces[name] = np.empty(size, dtype=dtype)
-    return buffer[:size].reshape(shape)
-
-
 def _thread_setting() -> int | None:
     value = os.environ.get("DEFACE_RENDER_THREADS", "")
     return int(value) if value.strip() else None
