@@ -24,6 +24,7 @@ def register(app: typer.Typer) -> None:
     )
     bench.command("make-shadows")(make_shadows_command)
     bench.command("run")(run_command)
+    bench.command("skin-tone")(skin_tone_command)
     app.add_typer(bench, name="bench")
 
 
@@ -110,3 +111,50 @@ def run_command(
     command += f" --limit {limit}" if limit else ""
     update_benchmarks_md(report, report_markdown(output, pairs, schedule, command, limit))
     console.print(f"wrote the evaluation tables to {report}")
+
+
+def skin_tone_command(
+    folder: Annotated[Path, typer.Argument(help="Folder with images/ and MANIFEST.tsv (file, tone_group[, gt_ita]).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Results folder (fits cached per photo).")],
+    preset: Annotated[str, typer.Option(help="The preset measured.")] = "default",
+    baseline: Annotated[bool, typer.Option("--baseline/--no-baseline", help="Also fit NextFace.")] = True,
+    schedule: Annotated[str, typer.Option(help="'full' (presets as defined) or 'quick'.")] = "full",
+    jobs: Annotated[int, typer.Option(help="Fits in parallel (one per core).")] = 2,
+    models: Annotated[Path | None, typer.Option("--models", help="Model files folder.")] = None,
+    report: Annotated[Path | None, typer.Option(help="Also rewrite this dataset's section of this file.")] = None,
+) -> None:
+    """ITA of each recovered albedo against the photo's (or the true) skin tone; report.md, results.json and
+    contact_sheet.png in OUTPUT."""
+    import json
+
+    from rich.console import Console
+
+    from deface.eval.benchmark import SCHEDULES, update_benchmarks_md
+    from deface.eval.tone_benchmark import contact_sheet, read_manifest, report_markdown, run_tone_benchmark, summary
+    from deface.fit import presets
+
+    console = Console(soft_wrap=True)
+    if schedule not in SCHEDULES:
+        raise typer.BadParameter(f"unknown schedule {schedule!r}; choose {', '.join(SCHEDULES)}")
+    try:
+        presets.get(preset)
+        photos = read_manifest(folder)
+    except ValueError as error:
+        console.print(f"[red]error:[/red] {error}")
+        raise typer.Exit(2) from None
+    records = run_tone_benchmark(folder, output, preset, baseline, SCHEDULES[schedule], jobs, models,
+                                 log=console.print)
+    command = f"deface bench skin-tone {folder} -o {output} --preset {preset} --schedule {schedule}"
+    command += "" if baseline else " --no-baseline"
+    section = report_markdown(photos, records, folder.resolve().name, command)
+    (output / "report.md").write_text(section)
+    (output / "results.json").write_text(json.dumps(
+        {v: {"summary": summary(photos, r), "photos": r} for v, r in records.items()}, indent=1))
+    sheet = contact_sheet(folder, output, photos, list(records))
+    if report is not None:
+        update_benchmarks_md(report, section, key=f"skin-tone-{folder.resolve().name}")
+    for variant, recs in records.items():
+        s = summary(photos, recs)
+        console.print(f"{variant}: MAE {s['mae']:.1f}, groups {', '.join(f'{g} {v:.1f}' for g, v in s['group_mae'].items())},"
+                      f" bias {s['bias']:.2f}, Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}")
+    console.print(f"wrote {output / 'report.md'} and {sheet}")

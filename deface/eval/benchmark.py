@@ -89,7 +89,7 @@ def _run_pair(task: tuple) -> tuple[str, str, float]:
     folder = Path(out_dir) / variant_name / pair.name
     cached = folder / "scores.json"
     config = variant_config(VARIANTS[variant_name], schedule)
-    scores = _cached_scores(cached, config)
+    scores = cached_scores(cached, config)
     if scores is not None:
         return variant_name, pair.name, scores["seconds_per_fit"]
     outcome = evaluate_pair(pair, config, folder, models_dir)
@@ -103,7 +103,7 @@ def config_json(config: FitConfig) -> dict:
     return json.loads(json.dumps(to_dict(config)))
 
 
-def _cached_scores(path: Path, config: FitConfig) -> dict | None:
+def cached_scores(path: Path, config: FitConfig) -> dict | None:
     """A pair's cached scores if they were fitted with this very configuration (a changed default refits)."""
     if not path.exists():
         return None
@@ -120,13 +120,13 @@ def run_benchmark(pairs_dir: Path, out_dir: Path, variants: list[str], schedule:
         raise ValueError(f"unknown variant(s) {unknown}; known: {', '.join(VARIANTS)}")
     pairs = read_pairs(pairs_dir)[:limit]
     tasks = [(v, schedule, pair, str(out_dir), models_dir) for v in variants for pair in pairs]
-    for name, pair_name, seconds in _map(_run_pair, tasks, jobs):
+    for name, pair_name, seconds in map_in_processes(_run_pair, tasks, jobs):
         log(f"{name} / {pair_name}: {seconds:.0f} s per fit")
     for name in variants:
         _write_variant_metrics(out_dir, name, pairs)
 
 
-def _map(function, tasks: list, jobs: int):
+def map_in_processes(function, tasks: list, jobs: int):
     """In order; in ``jobs`` fresh processes (spawned: forking after torch/MediaPipe start is unsafe)."""
     if jobs <= 1:
         yield from map(function, tasks)
@@ -148,7 +148,7 @@ def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
 def _fitted_now(out_dir: Path, name: str, schedule: str, pairs: list[Pair]) -> bool:
     """Whether every pair's cached scores were fitted with the variant's current configuration."""
     config = variant_config(VARIANTS[name], schedule)
-    return all(_cached_scores(out_dir / name / pair.name / "scores.json", config) is not None for pair in pairs)
+    return all(cached_scores(out_dir / name / pair.name / "scores.json", config) is not None for pair in pairs)
 
 
 def _row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair]) -> str:
@@ -197,15 +197,13 @@ def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str,
     return "\n".join(lines) + "\n"
 
 
-START, END = "<!-- eval:start -->", "<!-- eval:end -->"
-
-
-def update_benchmarks_md(path: Path, section: str) -> None:
-    """Replace the evaluation section of BENCHMARKS.md (between markers), or append it."""
+def update_benchmarks_md(path: Path, section: str, key: str = "eval") -> None:
+    """Replace the section ``key`` of BENCHMARKS.md (between its markers), or append it."""
+    start, end = f"<!-- {key}:start -->", f"<!-- {key}:end -->"
     text = path.read_text() if path.exists() else "# Benchmarks\n"
-    block = f"{START}\n{section}{END}\n"
-    if START in text and END in text:
-        text = text[: text.index(START)] + block + text[text.index(END) + len(END) + 1:]
+    block = f"{start}\n{section}{end}\n"
+    if start in text and end in text:
+        text = text[: text.index(start)] + block + text[text.index(end) + len(end) + 1:]
     else:
         text = text.rstrip("\n") + "\n\n" + block
     path.write_text(text)

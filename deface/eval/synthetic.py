@@ -66,7 +66,7 @@ def make_shadowed_face(model: FaceModel, size: int = 128, seed: int = 0, rays: i
     image = image * coverage[..., None] + background * (1 - coverage[..., None])
     ratio = shadowed.images[0].mean(-1) / clear.images[0].mean(-1).clamp_min(1e-6)
     shadow = (ratio.numpy() < 0.75) & (coverage > 0.5)
-    return SyntheticFace(linear_to_srgb(np.clip(image, 0, 1)), _landmarks(model, face, camera), textures,
+    return SyntheticFace(linear_to_srgb(np.clip(image, 0, 1)), true_landmarks(model, face, camera), textures,
                          shadow, shadowed.uv.numpy(), coverage)
 
 
@@ -84,7 +84,8 @@ def _brim_transfer(renderer: Renderer, face: Mesh) -> ShadowTransfer:
                           full.bands, full.rays)
 
 
-def _landmarks(model: FaceModel, face: Mesh, camera: Camera) -> Landmarks:
+def true_landmarks(model: FaceModel, face: Mesh, camera: Camera) -> Landmarks:
+    """MediaPipe-order landmarks of a posed mesh, exactly (no detector)."""
     projection = projection_for(model)
     corners = face.vertices[torch.as_tensor(model.triangles[projection.triangle_ids])]  # [478, 3, 3]
     points = (corners * torch.as_tensor(projection.barycentrics)[..., None]).sum(1)

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any, Literal
 
+from deface.priors.illuminant import IlluminantConfig
+
 
 @dataclass(frozen=True)
 class LightConfig:
@@ -107,6 +109,28 @@ class PriorConfig:
 
 
 @dataclass(frozen=True)
+class ToneConfig:
+    """Keeping the person's skin tone (docs/skin-tone.md): a free tone axis and lights held to the scene."""
+
+    free_tone: bool = False
+    """Stage 2 optimises the skin tone (ITA) along the albedo model's tone axis, flat prior over the human
+    range (deface/models/skin_tone.py); off: the model's mean skin, as the paper's AlbedoMM fit."""
+    scene_light_prior: bool = False
+    """Hold the lights' colour and the brightest light's white level to the scene's illuminant estimate
+    (deface/priors/illuminant.py, deface/losses/illuminant.py) in stages 2 and 3."""
+    weight: float = 1.0
+    """Weight of the scene-light terms (each a squared log-ratio over its sigma^2)."""
+    colour_sigma: float = 0.05
+    """Allowed log-ratio spread of a light's chromaticity around the estimate's."""
+    exposure_sigma: float = 0.1
+    """Allowed log-ratio spread of the brightest light's white level around the estimate's."""
+    learning_rate: float = 0.3
+    """Adam step of the tone (degrees of ITA)."""
+    illuminant: IlluminantConfig = field(default_factory=IlluminantConfig)
+    """How the scene's illuminant is estimated."""
+
+
+@dataclass(frozen=True)
 class FitConfig:
     """Everything one fit uses. Build from a preset: ``presets.get("default")``."""
 
@@ -124,6 +148,7 @@ class FitConfig:
     iterations: Iterations = field(default_factory=Iterations)
     learning_rates: LearningRates = field(default_factory=LearningRates)
     priors: PriorConfig = field(default_factory=PriorConfig)
+    tone: ToneConfig = field(default_factory=ToneConfig)
     supersampling: int = 2
     """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
     render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between

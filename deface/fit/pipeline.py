@@ -16,13 +16,14 @@ from deface.fit.log import FitLog
 from deface.fit.scene import SceneParameters, initial_lights, topology_tensors
 from deface.fit.stage1 import Stage1Config, fit_landmarks
 from deface.fit.stage2 import FrameRender, StageContext, run_stage2
-from deface.fit.stage3 import FrozenFrame, render_frozen, run_stage3
+from deface.fit.stage3 import FrozenFrame, relight_frozen, render_frozen, run_stage3
 from deface.fit.target import FitTarget, scale_landmarks, working_frames
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.registry import load_face_model
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
+from deface.priors.illuminant import estimate_illuminant
 from deface.render.mesh import Textures
 
 
@@ -42,6 +43,11 @@ class FitResult:
         textures = textures or self.textures
         with torch.no_grad():
             return [render_frozen(self.context, frame, textures)[0] for frame in self.frozen]
+
+    def relight(self, lights: torch.Tensor, textures: Textures | None = None) -> list[torch.Tensor]:
+        """Per-frame faces [H, W, 3] (linear, 0 off the face) under ``lights`` [K, B*B, 3], summed."""
+        with torch.no_grad():
+            return [relight_frozen(self.context, frame, textures or self.textures, lights) for frame in self.frozen]
 
     def composite(self, rendered: FrameRender, frame: int) -> torch.Tensor:
         """I_out [H, W, 3] linear: the face where M_o says so, the input elsewhere."""
@@ -101,6 +107,10 @@ def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | 
     model = load_face_model(config.model, models_dir)
     context = _stage1(model, target, config, log)
     optional = _face_classifier(context, config, models_dir, log)
+    if config.tone.scene_light_prior:
+        context.illuminant = _scene_illuminant(context, config)
+        log.info(f"scene illuminant: {context.illuminant.source}, white level "
+                 f"{np.round(context.illuminant.white, 3).tolist()}, {context.illuminant.cct:.0f} K")
     log.start("stage 2")
     run_stage2(context)
     log.stop("stage 2")
@@ -125,10 +135,19 @@ def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog) -> StageCo
         identity=torch.as_tensor(result.identity), expression=torch.as_tensor(result.expression),
         rotation=torch.as_tensor(result.rotation), translation=torch.as_tensor(result.translation),
         focal=torch.as_tensor(result.focal), albedo=torch.zeros(model.albedo.num_coeffs),
-        lights=initial_lights(config.lights),
+        lights=initial_lights(config.lights), tone=_initial_tone(model, config),
     )
     decoupling = Decoupling(config.decouple, config.lights.num_lights, target.num_frames, target.size)
     return StageContext(model, target, scene, decoupling, config, topology_tensors(model), log)
+
+
+def _initial_tone(model, config: FitConfig) -> float:
+    """The tone a free-tone fit starts from: the albedo model's own mean skin (a flat prior has no mode)."""
+    if not config.tone.free_tone:
+        return 0.0
+    if model.albedo.tone is None:
+        raise ValueError(f"the {model.name} albedo model has no skin-tone axis: use a preset without tone.free_tone")
+    return model.albedo.tone.reference_ita
 
 
 def _stage1_config(iterations: int) -> Stage1Config:
@@ -148,6 +167,16 @@ def _face_classifier(context: StageContext, config: FitConfig, models_dir, log: 
         h = classifier(target.frames_srgb[frame], coverage.numpy(), target.landmarks[frame].points)
         target.face_classifier[frame] = torch.as_tensor(np.asarray(h), dtype=torch.float32)
     return {"face_parsing": note}
+
+
+@torch.no_grad()
+def _scene_illuminant(context: StageContext, config: FitConfig):
+    """The illuminant estimate from every frame's pixels outside the stage-1 face."""
+    faces = []
+    for frame in range(context.target.num_frames):
+        geometry = context.geometry(frame)
+        faces.append(context.renderer.rasterize(geometry.mesh, geometry.camera).mask.numpy() > 0)
+    return estimate_illuminant(context.target.frames_srgb, faces, config.tone.illuminant)
 
 
 def _classifier(source: str, models_dir):

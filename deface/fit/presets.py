@@ -18,7 +18,10 @@
   and ACE then dropped its light; n = 3 initial lights instead of 5 (one lit, one shadowed, one spare is
   what a cast shadow needs; more lights split the lit skin); and 4 octaves of sin/cos features
   on f's input, without which the authors' small MLP on raw (x, y) cannot draw the sharp, thin edges of
-  blinds, fingers and leaves and the shadow is baked into the texture. ``paper`` keeps the paper's values.
+  blinds, fingers and leaves and the shadow is baked into the texture. It also keeps the person's skin tone
+  (``tone``): the albedo's tone is free along a flat-prior tone axis and the lights are held to the scene's
+  illuminant, without which the lights absorbed every skin's tone and all textures came out alike
+  (docs/skin-tone.md). ``paper`` keeps the paper's values.
 - ``default``: the preset ``deface fit`` uses when none is given (see DEFAULT_PRESET).
 """
 
@@ -33,6 +36,7 @@ from deface.fit.config import (
     LearningRates,
     LightConfig,
     PriorConfig,
+    ToneConfig,
     Weights,
     override,
 )
@@ -76,6 +80,7 @@ def _deface() -> FitConfig:
         preset="deface",
         lights=LightConfig(num_lights=3),
         decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES),
+        tone=ToneConfig(free_tone=True, scene_light_prior=True),
     )
 
 

@@ -31,7 +31,8 @@ class SceneParameters(torch.nn.Module):
     """All optimisable face/camera/light coefficients of one fit."""
 
     def __init__(self, identity: torch.Tensor, expression: torch.Tensor, rotation: torch.Tensor,
-                 translation: torch.Tensor, focal: torch.Tensor, albedo: torch.Tensor, lights: torch.Tensor):
+                 translation: torch.Tensor, focal: torch.Tensor, albedo: torch.Tensor, lights: torch.Tensor,
+                 tone: float = 0.0):
         super().__init__()
         self.identity = torch.nn.Parameter(identity.float().clone())  # [Ki]
         self.expression = torch.nn.Parameter(expression.float().clone())  # [T, Ke]
@@ -40,6 +41,7 @@ class SceneParameters(torch.nn.Module):
         self.focal = torch.nn.Parameter(focal.float().clone().reshape(()))  # [] pixels
         self.albedo = torch.nn.Parameter(albedo.float().clone())  # [Ka]
         self.lights = torch.nn.Parameter(lights.float().clone())  # [n, B*B, 3]
+        self.tone = torch.nn.Parameter(torch.tensor(float(tone)))  # [] skin tone, ITA degrees (tone axis)
 
     @property
     def num_frames(self) -> int:

@@ -17,7 +17,9 @@ from deface.fit.decoupling import Decoupling
 from deface.fit.scene import SceneParameters, frame_geometry
 from deface.fit.target import FitTarget
 from deface.losses import decouple as decouple_losses
+from deface.losses.illuminant import front_directions, scene_light_terms
 from deface.losses.photometric import photometric_loss
+from deface.priors.illuminant import IlluminantEstimate
 from deface.render.mesh import Textures
 from deface.render.renderer import Renderer, ShadowTransferCache
 
@@ -45,14 +47,28 @@ class StageContext:
         self.config, self.topology, self.log = config, topology, log
         self.renderer = Renderer(target.render_config(config))
         self.shadow_caches = [ShadowTransferCache(self.renderer) for _ in range(target.num_frames)]
+        self.illuminant: IlluminantEstimate | None = None  # the scene's light, set after stage 1
+        self._directions = front_directions()
 
     def geometry(self, frame: int):
         return frame_geometry(self.model, self.scene, self.topology, frame, self.target.size)
 
-    def albedo_textures(self) -> Textures:
-        diffuse, specular = self.model.albedo.textures(self.scene.albedo, STAGE2_TEXTURE_SIZE)
+    def albedo_textures(self, size: int = STAGE2_TEXTURE_SIZE) -> Textures:
+        """The albedo model's maps at the fitted coefficients (and tone, when the tone is free)."""
+        ita = self.scene.tone if self.config.tone.free_tone else None
+        diffuse, specular = self.model.albedo.textures(self.scene.albedo, size, ita)
         roughness = torch.full((*diffuse.shape[:2], 1), self.model.albedo.roughness_default)
         return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
+
+    def scene_light_prior(self) -> torch.Tensor:
+        """The scene-light terms for the kept lights (0 when off or without an estimate)."""
+        tone = self.config.tone
+        if not tone.scene_light_prior or self.illuminant is None:
+            return torch.zeros(())
+        white = torch.as_tensor(self.illuminant.white, dtype=torch.float32)
+        colour, exposure = scene_light_terms(self.scene.lights[self.decoupling.kept], white, self._directions,
+                                             tone.colour_sigma, tone.exposure_sigma)
+        return tone.weight * (colour + exposure)
 
     def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool, geometry=None) -> FrameRender:
         geometry = geometry or self.geometry(frame)
@@ -97,6 +113,8 @@ def run_stage2(context: StageContext) -> list[float]:
         loss.backward()
         optimiser.step()
         scene.clamp_(context.model.expression_prior)
+        if config.tone.free_tone:
+            context.model.albedo.tone.clamp_(scene.tone)
         value = float(loss.detach())
         history.append(value)
         context.log.step("stage 2", step, config.iterations.stage2, value)
@@ -112,6 +130,8 @@ def _parameter_groups(context: StageContext) -> list[dict]:
         {"params": [scene.expression], "lr": rates.expression},
         {"params": [scene.rotation, scene.translation], "lr": rates.pose},
     ]
+    if context.config.tone.free_tone:
+        groups.append({"params": [scene.tone], "lr": context.config.tone.learning_rate})
     if context.decoupling.light_field is not None:
         groups.append({"params": context.decoupling.light_field.parameters(), "lr": rates.light_masks})
     if context.decoupling.region_field is not None:
@@ -134,7 +154,7 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool)
     total = total + weights.albedo_prior * scene.albedo.pow(2).mean()
     total = total + weights.identity_prior * scene.identity.pow(2).mean()
     total = total + weights.expression_prior * scene.expression.pow(2).mean()
-    return total
+    return total + context.scene_light_prior()
 
 
 def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool) -> torch.Tensor:

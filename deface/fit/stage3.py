@@ -49,10 +49,8 @@ class TextureParameters(torch.nn.Module):
 
 def initial_textures(context: StageContext) -> Textures:
     """T^0 at the output resolution from the fitted albedo coefficients."""
-    size = context.config.texture_size
-    diffuse, specular = context.model.albedo.textures(context.scene.albedo.detach(), size)
-    roughness = torch.full((size, size, 1), context.model.albedo.roughness_default)
-    return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
+    with torch.no_grad():
+        return context.albedo_textures(context.config.texture_size)
 
 
 @dataclass(frozen=True)
@@ -89,7 +87,7 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
 
     def loss_of(textures: Textures) -> torch.Tensor:
         loss = sum(_frame_loss(context, f, textures, human_prior) for f in frozen) / len(frozen)
-        return loss + _texture_terms(context, textures, initial, palette, uv_mask)
+        return loss + _texture_terms(context, textures, initial, palette, uv_mask) + context.scene_light_prior()
 
     return loss_of
 
@@ -125,11 +123,17 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
     return FrozenFrame(frame, geometry, camera, fragments, transfer, face_region.detach(), reference)
 
 
-def _shade(context: StageContext, mesh, camera, fragments, textures: Textures, transfer):
-    """Shade under the kept lights, box-filtered to the working resolution."""
-    output = context.renderer.shade(mesh, camera, fragments, textures,
-                                    context.scene.lights[context.decoupling.kept], transfer)
+def _shade(context: StageContext, mesh, camera, fragments, textures: Textures, transfer, lights=None):
+    """Shade under ``lights`` [K, B*B, 3] (default: the kept lights), box-filtered to the working resolution."""
+    lights = context.scene.lights[context.decoupling.kept] if lights is None else lights
+    output = context.renderer.shade(mesh, camera, fragments, textures, lights, transfer)
     return box_filter(output, context.config.supersampling)
+
+
+def relight_frozen(context: StageContext, frame: FrozenFrame, textures: Textures, lights: torch.Tensor):
+    """The face of a frozen frame under other ``lights`` [K, B*B, 3], summed (no light masks): [H, W, 3]."""
+    output = _shade(context, frame.geometry.mesh, frame.camera, frame.fragments, textures, frame.transfer, lights)
+    return output.images.sum(0)
 
 
 def _topology(context: StageContext):

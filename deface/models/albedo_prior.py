@@ -31,6 +31,7 @@ from scipy import ndimage
 from skimage.draw import polygon as draw_polygon
 
 from deface.models.base import AlbedoModel
+from deface.models.skin_tone import SkinToneAxis
 from deface.models.uvmap import coverage, fill_outside, rasterize_uv, texel_centres
 
 # Jensen et al. 2001, Table 1, total diffuse reflectance Rd (R, G, B) of two skin samples.
@@ -334,6 +335,7 @@ def build_albedo_prior(
             "T-zone and roughness after Weyrich et al. 2006; see docs/albedo-prior.md"
         ),
         component_names=tuple(names),
+        tone=SkinToneAxis.through(config.skin_rgb),
     )
 
 

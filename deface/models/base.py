@@ -14,6 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from deface.models.skin_tone import SkinToneAxis
+
 
 @dataclass(frozen=True)
 class AlbedoModel:
@@ -30,14 +32,21 @@ class AlbedoModel:
     face_mask: np.ndarray  # [Ht, Wt] float in [0, 1], texels covered by the face's UV layout
     description: str  # where the numbers come from (shown in params.json)
     component_names: tuple[str, ...] = ()  # optional name per coefficient (e.g. "melanin:s0v0")
+    tone: SkinToneAxis | None = None  # the skin-tone axis through the mean skin (None: the model has none)
 
     @property
     def num_coeffs(self) -> int:
         return int(self.diffuse_basis.shape[0])
 
-    def textures(self, coeffs: torch.Tensor, size: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """Diffuse and specular UV maps [size, size, 3] for coeffs [Ka], differentiable in coeffs."""
+    def textures(self, coeffs: torch.Tensor, size: int, ita: torch.Tensor | None = None
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Diffuse and specular UV maps [size, size, 3] for coeffs [Ka], differentiable in coeffs; with a
+        skin tone ``ita`` (degrees, scalar tensor) the diffuse map is moved along :attr:`tone` to it."""
         diffuse = _combine(self.diffuse_mean, self.diffuse_basis, coeffs)
+        if ita is not None:
+            if self.tone is None:
+                raise ValueError("this albedo model has no skin-tone axis")
+            diffuse = diffuse * self.tone.scale(ita.to(diffuse.dtype))
         specular = _combine(self.specular_mean, self.specular_basis, coeffs)
         return _resize(diffuse, size), _resize(specular, size)
 

@@ -255,3 +255,16 @@ def phong_lobe_filter(roughness: torch.Tensor, bands: int) -> torch.Tensor:
     exponent = (2.0 / (alpha * alpha) - 2.0).clamp_min(1e-4)  # [...]
     l_sq = torch.arange(bands, dtype=roughness.dtype, device=roughness.device) ** 2
     return torch.exp(-l_sq / (2.0 * exponent[..., None]))
+
+
+def white_light(bands: int, ambient: float = 0.7) -> torch.Tensor:
+    """[1, bands², 3] a neutral light: uniform plus a first-order lobe towards +z (the viewer in the model
+    frame), scaled so a white Lambertian surface shows ``ambient`` sideways and exactly 1 facing +z
+    (diffuse radiance E / pi with E = A_0 c_00 Y_00 + A_1 c_10 Y_10). Renders under it show the albedo itself
+    where the surface faces the viewer."""
+    coeffs = torch.zeros(bands * bands)
+    y00, y10_scale = 0.5 / math.sqrt(math.pi), math.sqrt(3.0 / (4.0 * math.pi))
+    coeffs[0] = ambient / y00  # (A_0 / pi) c_00 Y_00 = ambient
+    if bands > 1:
+        coeffs[2] = (1.0 - ambient) / (cosine_lobe_band(1) / math.pi * y10_scale)  # index l*l + l + m of (1, 0)
+    return coeffs[None, :, None].expand(1, bands * bands, 3).clone()

@@ -1,0 +1,110 @@
+"""Skin tone as the individual typology angle (ITA), measured on a texture and on the photo it came from.
+
+ITA = atan2(L* - 50, b*) in degrees, CIELAB (D65) of sRGB-encoded colours (Chardon, Cretois, Hourseau,
+"Skin colour typology and suntanning pathways", Int. J. Cosmet. Sci. 1991; the measure of the FAIR albedo
+benchmark, Feng et al., TRUST, ECCV 2022). Groups after Del Bino et al. 2006: > 55 very light, 41-55 light,
+28-41 intermediate, 10-28 tan, -30-10 brown, < -30 dark.
+
+Where: the median (L*, a*, b*) over three UV boxes of the ICT layout, both cheeks and the forehead
+(:data:`TONE_BOXES`; the boxes the ground truth of ``../shared/data/skin-tone-synth`` is measured on), then
+the ITA of that median. On a texture every texel in the boxes counts. On a photo the same boxes are found
+through the fitted geometry: each covered pixel's UV (from the fit's ray cast) picks the pixels that show the
+cheeks and forehead; of those, pixels the face-region classifier h rejects (hair, glasses), clipped pixels
+(a channel >= 0.98: highlights) and shadowed pixels (luminance below half the 90th percentile of the region:
+cast and attached shadows) are left out, so the photo's ITA is that of its lit skin.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from skimage.color import rgb2lab
+
+# (u0, u1, y0, y1) with y = 1 - v measured downward from the texture image's top (ICT layout).
+TONE_BOXES = {
+    "left_cheek": (0.195, 0.342, 0.42, 0.547),
+    "right_cheek": (0.658, 0.805, 0.42, 0.547),
+    "forehead": (0.352, 0.648, 0.137, 0.205),
+}
+CLIPPED = 0.98  # sRGB value at which a channel counts as clipped
+SHADOW_FRACTION = 0.5  # pixels darker than this fraction of the region's 90th-percentile luminance are shadow
+MIN_PIXELS = 12  # fewer usable pixels than this: no photo ITA
+
+
+def ita_degrees(lab: np.ndarray) -> np.ndarray:
+    """ITA in degrees of CIELAB values [..., 3]."""
+    lab = np.asarray(lab, dtype=np.float64)
+    return np.degrees(np.arctan2(lab[..., 0] - 50.0, lab[..., 2]))
+
+
+def median_lab(srgb: np.ndarray) -> np.ndarray:
+    """Median (L*, a*, b*) [3] of sRGB-encoded colours [N, 3] in [0, 1]."""
+    lab = rgb2lab(np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)[None])[0]
+    return np.median(lab, axis=0)
+
+
+def ita_of_srgb(srgb: np.ndarray) -> float:
+    """ITA of the median CIELAB colour of sRGB pixels [N, 3]."""
+    return float(ita_degrees(median_lab(srgb)))
+
+
+def in_tone_boxes(uv: np.ndarray) -> np.ndarray:
+    """Whether UV coordinates [..., 2] (v up) fall in a cheek or forehead box -> bool [...]."""
+    u, y = uv[..., 0], 1.0 - uv[..., 1]
+    inside = np.zeros(u.shape, dtype=bool)
+    for u0, u1, y0, y1 in TONE_BOXES.values():
+        inside |= (u >= u0) & (u <= u1) & (y >= y0) & (y <= y1)
+    return inside
+
+
+def texture_tone_mask(height: int, width: int) -> np.ndarray:
+    """bool [H, W]: texels of a texture image (row 0 = v 1) whose centres fall in the tone boxes."""
+    v = 1.0 - (np.arange(height) + 0.5) / height
+    u = (np.arange(width) + 0.5) / width
+    grid = np.stack(np.meshgrid(u, v, indexing="xy"), -1)
+    return in_tone_boxes(grid)
+
+
+def texture_ita(diffuse_srgb: np.ndarray) -> float:
+    """ITA of a diffuse texture [H, W, 3] (sRGB-encoded, as written to textures/diffuse.png)."""
+    mask = texture_tone_mask(*diffuse_srgb.shape[:2])
+    return ita_of_srgb(diffuse_srgb[mask])
+
+
+def lit_skin(pixels_srgb: np.ndarray) -> np.ndarray:
+    """bool [N]: pixels that are neither clipped nor in shadow (see the module doc)."""
+    if len(pixels_srgb) == 0:
+        return np.zeros(0, dtype=bool)
+    unclipped = pixels_srgb.max(-1) < CLIPPED
+    luminance = (pixels_srgb**2.2) @ np.array([0.2126, 0.7152, 0.0722])
+    bright = np.percentile(luminance[unclipped], 90) if unclipped.any() else np.inf
+    return unclipped & (luminance >= SHADOW_FRACTION * bright)
+
+
+@dataclass(frozen=True)
+class PhotoTone:
+    """The photo's lit skin over the tone boxes: its ITA (NaN when too few pixels) and pixel count."""
+
+    ita: float
+    pixels: int
+
+
+def photo_tone(photo_srgb: np.ndarray, uv: np.ndarray, covered: np.ndarray, skin: np.ndarray) -> PhotoTone:
+    """Photo [H, W, 3] sRGB; uv [H, W, 2] of the fitted face; covered, skin [H, W] bool (M_R, h > 0.5)."""
+    region = covered & skin & in_tone_boxes(uv)
+    pixels = photo_srgb[region]
+    usable = pixels[lit_skin(pixels)]
+    if len(usable) < MIN_PIXELS:
+        return PhotoTone(float("nan"), int(len(usable)))
+    return PhotoTone(ita_of_srgb(usable), int(len(usable)))
+
+
+def pixel_uvs(fragments, mesh) -> np.ndarray:
+    """[H, W, 2] UV of every covered pixel (0 elsewhere) from ray-cast ``fragments`` of ``mesh``."""
+    corners = mesh.uvs[mesh.triangle_uvs[fragments.covered_triangles]]  # [N, 3, 2]
+    uv = (fragments.covered_barycentrics.detach()[..., None] * corners).sum(1)
+    height, width = fragments.triangle_id.shape
+    full = torch.zeros(height * width, 2, dtype=uv.dtype).index_copy(0, fragments.covered, uv)
+    return full.reshape(height, width, 2).numpy()

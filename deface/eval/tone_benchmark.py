@@ -1,0 +1,213 @@
+"""The skin-tone benchmark: does the recovered albedo keep each person's tone?
+
+A folder holds ``images/`` and ``MANIFEST.tsv`` (columns ``file`` and ``tone_group``; ``gt_ita`` when the true
+albedo's ITA is known, as in ``../shared/data/skin-tone-synth``). Every photo is fitted with each variant
+(the chosen preset, and NextFace as the baseline), cached per photo with its configuration, and scored by
+:mod:`deface.eval.skin_tone`: the ITA of the diffuse texture against the reference, which is ``gt_ita`` where
+given and otherwise the ITA of the photo's lit skin over the same facial regions (a proxy: it includes the
+photo's light and exposure).
+
+Figures (FAIR's, Feng et al. 2022): mean absolute ITA error overall and per tone group; the bias score, the
+standard deviation of the groups' mean absolute errors; Spearman's rank correlation and the regression slope
+of albedo ITA on reference ITA (0: one tone for everybody; 1: the tone scale is kept).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from deface.eval.benchmark import cached_scores, config_json, map_in_processes
+from deface.fit import presets
+from deface.fit.config import FitConfig, override
+
+GROUP_ORDER = ("dark", "medium", "light")
+BASELINE = "nextface"
+
+
+@dataclass(frozen=True)
+class TonePhoto:
+    file: str
+    group: str
+    gt_ita: float | None  # the true albedo's ITA (synthetic sets), else None
+
+    @property
+    def stem(self) -> str:
+        return Path(self.file).stem
+
+
+def read_manifest(folder: Path) -> list[TonePhoto]:
+    """The photos of a skin-tone folder; one-line errors for a missing manifest, column or image."""
+    manifest = folder / "MANIFEST.tsv"
+    if not manifest.is_file():
+        raise ValueError(f"{folder}: no MANIFEST.tsv (columns file, tone_group[, gt_ita])")
+    with manifest.open(newline="") as handle:
+        rows = list(csv.DictReader(handle, delimiter="\t"))
+    missing = {"file", "tone_group"} - set(rows[0] if rows else {})
+    if missing:
+        raise ValueError(f"{manifest}: missing column(s) {', '.join(sorted(missing))}")
+    photos = [TonePhoto(r["file"], r["tone_group"], float(r["gt_ita"]) if r.get("gt_ita") else None) for r in rows]
+    absent = [p.file for p in photos if not (folder / "images" / p.file).is_file()]
+    if absent:
+        raise ValueError(f"{folder / 'images'}: missing {', '.join(absent)}")
+    return photos
+
+
+def variant_config(preset: str, schedule: dict) -> FitConfig:
+    return override(presets.get(preset), **schedule)
+
+
+def _fit_photo(task: tuple) -> dict:
+    """Worker: fit one photo with one variant, write its outputs and tone.json; cached by configuration."""
+    folder, photo, preset, schedule, out_dir, models_dir = task
+    result_dir = Path(out_dir) / preset / photo.stem
+    config = variant_config(preset, schedule)
+    cached = cached_scores(result_dir / "tone.json", config)
+    if cached is not None:
+        return cached
+    record = measure_photo(Path(folder) / "images" / photo.file, config, result_dir, models_dir)
+    record["config"] = config_json(config)
+    (result_dir / "tone.json").write_text(json.dumps(record, indent=1))
+    return record
+
+
+def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=None) -> dict:
+    """Fit ``path``, write the fit and a neutral-light render into ``result_dir``, return the tone record."""
+    import torch
+
+    from deface.eval.skin_tone import photo_tone, pixel_uvs, texture_ita
+    from deface.export.files import save_png
+    from deface.export.outputs import write_fit
+    from deface.fit.log import FitLog
+    from deface.fit.pipeline import fit
+    from deface.io.images import linear_to_srgb, load_image
+    from deface.render.sh import white_light
+
+    started = time.perf_counter()
+    result = fit([load_image(path)], config, models_dir=models_dir, source=str(path), log=FitLog(quiet=True))
+    seconds = time.perf_counter() - started
+    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]})
+    neutral = result.relight(white_light(config.lights.bands))[0]
+    save_png(result_dir / "neutral.png", neutral.clamp(0, 1).numpy())
+    context, frame = result.context, result.frozen[0]
+    fragments = context.renderer.rasterize(frame.geometry.mesh, frame.geometry.camera)
+    skin = context.target.face_classifier[0].numpy() > 0.5
+    photo = photo_tone(context.target.frames_srgb[0], pixel_uvs(fragments, frame.geometry.mesh),
+                       fragments.mask.numpy() > 0, skin)
+    to_srgb = lambda t: linear_to_srgb(t.detach().clamp(0, 1).numpy())  # noqa: E731
+    illuminant = context.illuminant.record() if context.illuminant is not None else None
+    return {"albedo_ita": texture_ita(to_srgb(result.textures.diffuse)),
+            "initial_ita": texture_ita(to_srgb(result.initial_textures.diffuse)),
+            "photo_ita": photo.ita, "photo_pixels": photo.pixels, "seconds": seconds,
+            "tone": float(torch.as_tensor(context.scene.tone).detach()), "illuminant": illuminant}
+
+
+def run_tone_benchmark(folder: Path, out_dir: Path, preset: str, baseline: bool, schedule: dict,
+                       jobs: int = 2, models_dir=None, log=print) -> dict:
+    """Fit every photo with ``preset`` (and NextFace when ``baseline``); returns {variant: {stem: record}}."""
+    photos = read_manifest(folder)
+    variants = [preset] + ([BASELINE] if baseline and preset != BASELINE else [])
+    tasks = [(str(folder), p, v, schedule, str(out_dir), models_dir) for v in variants for p in photos]
+    records: dict = {v: {} for v in variants}
+    for task, record in zip(tasks, map_in_processes(_fit_photo, tasks, jobs), strict=True):
+        variant, photo = task[2], task[1]
+        records[variant][photo.stem] = record
+        log(f"{variant} / {photo.stem}: albedo ITA {record['albedo_ita']:.1f}, reference "
+            f"{reference_ita(photo, record):.1f} ({record['seconds']:.0f} s)")
+    return records
+
+
+def reference_ita(photo: TonePhoto, record: dict) -> float:
+    """The truth where known, else the photo's lit skin."""
+    return photo.gt_ita if photo.gt_ita is not None else record["photo_ita"]
+
+
+def summary(photos: list[TonePhoto], records: dict) -> dict:
+    """FAIR-style figures of one variant's records {stem: record}."""
+    albedo = np.array([records[p.stem]["albedo_ita"] for p in photos])
+    reference = np.array([reference_ita(p, records[p.stem]) for p in photos])
+    valid = np.isfinite(reference)
+    error = np.abs(albedo - reference)
+    groups = [g for g in GROUP_ORDER if any(p.group == g for p in photos)]
+    groups += sorted({p.group for p in photos} - set(groups))
+    group_mae = {g: float(np.nanmean([e for e, p in zip(error, photos, strict=True) if p.group == g]))
+                 for g in groups}
+    slope = float(np.polyfit(reference[valid], albedo[valid], 1)[0]) if valid.sum() > 1 else float("nan")
+    rho = float(stats.spearmanr(reference[valid], albedo[valid])[0]) if valid.sum() > 2 else float("nan")
+    return {"mae": float(np.nanmean(error)), "group_mae": group_mae,
+            "bias": float(np.std(list(group_mae.values()))), "spearman": rho, "slope": slope,
+            "mean_signed": float(np.nanmean(albedo - reference)), "photos": int(valid.sum())}
+
+
+def report_markdown(photos: list[TonePhoto], records: dict, title: str, command: str) -> str:
+    """A section for BENCHMARKS.md: the figures per variant, then one row per photo."""
+    reference_kind = "true albedo ITA (gt_ita)" if all(p.gt_ita is not None for p in photos) else \
+        "ITA of the photo's lit skin (a proxy)"
+    lines = [f"## Skin tone: {title}", "", f"Regenerate: `{command}`", "",
+             f"{len(photos)} photos; reference = {reference_kind}; ITA in degrees over both cheeks and the forehead"
+             " (docs/skin-tone.md). Bias = std of the groups' mean absolute errors; slope = regression slope of"
+             " albedo ITA on the reference (1 keeps the tone scale, 0 gives everybody one tone).", ""]
+    groups = list(summary(photos, next(iter(records.values())))["group_mae"])
+    lines += ["| variant | MAE | " + " | ".join(f"MAE {g}" for g in groups) + " | bias | Spearman | slope |"
+              " mean signed | max error |", "|---" * (7 + len(groups)) + "|"]
+    for variant, recs in records.items():
+        s = summary(photos, recs)
+        worst = max(abs(recs[p.stem]["albedo_ita"] - reference_ita(p, recs[p.stem])) for p in photos
+                    if np.isfinite(reference_ita(p, recs[p.stem])))
+        cells = [f"{s['mae']:.1f}", *[f"{s['group_mae'][g]:.1f}" for g in groups], f"{s['bias']:.2f}",
+                 f"{s['spearman']:.2f}", f"{s['slope']:.2f}", f"{s['mean_signed']:+.1f}", f"{worst:.1f}"]
+        lines.append(f"| {variant} | " + " | ".join(cells) + " |")
+    lines += ["", "| photo | group | reference | " + " | ".join(f"{v} albedo" for v in records) + " |",
+              "|---|---|---|" + "---|" * len(records)]
+    for p in photos:
+        reference = reference_ita(p, next(iter(records.values()))[p.stem])
+        cells = [f"{records[v][p.stem]['albedo_ita']:.1f}" for v in records]
+        lines.append(f"| {p.file} | {p.group} | {reference:.1f} | " + " | ".join(cells) + " |")
+    lines.append(f"\n_Written {time.strftime('%Y-%m-%d %H:%M')}._")
+    return "\n".join(lines) + "\n"
+
+
+def contact_sheet(folder: Path, out_dir: Path, photos: list[TonePhoto], variants: list[str], tile: int = 160):
+    """OUT/contact_sheet.png: per photo, the photo | albedo texture | albedo under a neutral white light
+    (first variant) | the other variants' albedo textures; the ITAs underneath."""
+    from PIL import Image, ImageDraw
+
+    columns = 3 + len(variants) - 1
+    caption = 14
+    sheet = Image.new("RGB", (columns * tile, len(photos) * (tile + caption)), "white")
+    draw = ImageDraw.Draw(sheet)
+    for row, photo in enumerate(photos):
+        first = out_dir / variants[0] / photo.stem
+        images = [folder / "images" / photo.file, first / "textures" / "diffuse.png", first / "neutral.png"]
+        images += [out_dir / v / photo.stem / "textures" / "diffuse.png" for v in variants[1:]]
+        top = row * (tile + caption)
+        for column, path in enumerate(images):
+            with Image.open(path) as image:
+                image = image.convert("RGB")
+                image = _face_crop(image) if column == 2 else image
+                image.thumbnail((tile, tile))
+                sheet.paste(image, (column * tile, top))
+        texts = [f"{photo.file[:22]}", *[_ita_caption(out_dir / v / photo.stem / "tone.json", photo) for v in variants]]
+        draw.text((2, top + tile), "   |   ".join(texts), fill="black")
+    path = out_dir / "contact_sheet.png"
+    sheet.save(path)
+    return path
+
+
+def _face_crop(image):
+    """The bounding box of the non-black pixels (the rendered face), squared."""
+    box = image.getbbox() or (0, 0, *image.size)
+    side = max(box[2] - box[0], box[3] - box[1])
+    cx, cy = (box[0] + box[2]) // 2, (box[1] + box[3]) // 2
+    return image.crop((cx - side // 2, cy - side // 2, cx + side // 2, cy + side // 2))
+
+
+def _ita_caption(path: Path, photo: TonePhoto) -> str:
+    record = json.loads(path.read_text())
+    return f"{path.parent.parent.name} {record['albedo_ita']:.0f} (ref {reference_ita(photo, record):.0f})"

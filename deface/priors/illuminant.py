@@ -1,0 +1,168 @@
+"""The scene's illuminant, estimated from the whole image outside the face: the evidence that separates a
+person's skin tone from the light's colour and strength (the light/albedo ambiguity; Feng et al., "Towards
+Racially Unbiased Skin Tone Estimation via Scene Disambiguation", ECCV 2022: the scene, not the face crop,
+shows the illumination).
+
+The estimate is the *white level* W [3]: the linear value a white Lambertian surface facing the key light
+shows in the image. A fit whose brightest light shows W keeps the skin's own reflectance in the albedo.
+
+Only pixels away from the face are used (the face's coverage, dilated by ``face_margin`` of its size), so the
+estimate does not depend on the skin being measured; clipped (a channel >= ``clipped``) and near-black
+pixels are left out. Evidence, in order:
+- **White patch** (Land's retinex; max-RGB): when at least ``white_fraction`` of those pixels are near white
+  (every sRGB channel >= ``white_threshold``), the scene shows a white surface: its median colour divided by
+  ``white_reflectance`` is W (clipped pixels count as 1.0 here: the photo's white point).
+- **Grey world** otherwise (Buchsbaum 1980): the scene averages to ``scene_reflectance`` (18 %, the
+  photographic mid-grey), so W's luminance is the mean luminance over ``scene_reflectance``, never below the
+  99th percentile of the scene (no diffuse surface reflects more than white). The colour is the
+  shades-of-grey Minkowski p-norm (Finlayson & Trezzi 2004, p = ``minkowski_p``).
+- **The photo's exposure**: a photo is exposed so that white is near its white point (W = 1). Scenes differ
+  in mean reflectance by a stop or more (a white studio, a night street), so the scene's level is combined
+  with this prior in log space, each weighted by 1 / sigma^2 (``white_patch_sigma``, ``grey_world_sigma``,
+  ``exposure_sigma``): a white patch nearly decides, a grey world moves W part of the way.
+- **Plausible illuminants**: the colour is projected onto the Planckian locus (correlated colour temperature
+  via Ohno 2013, colour-science) and pulled towards the photo's own white point (``neutral_cct``, D65's
+  6504 K: cameras white-balance) by how far the estimate lies off the locus (``duv_sigma``): a blue sea or a
+  red brick wall is not taken for a blue or red light, a warm room light is.
+With too few scene pixels (a tight crop) the estimate falls back to the photo's white point: W = 1, neutral.
+Clips pool the pixels of all frames.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from deface.io.images import srgb_to_linear
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 / sRGB
+
+
+@dataclass(frozen=True)
+class IlluminantConfig:
+    """Settings of :func:`estimate_illuminant` (sources of the numbers in the module doc)."""
+
+    face_margin: float = 0.25
+    """Dilation of the face's coverage, as a fraction of the face's size, before the scene is read."""
+    clipped: float = 0.98
+    """sRGB value at which a channel counts as clipped."""
+    dark: float = 0.02
+    """Pixels with linear luminance below this are left out (no colour to read)."""
+    white_threshold: float = 0.85
+    """sRGB: a pixel whose every channel reaches this (or is clipped) is near white."""
+    white_fraction: float = 0.1
+    """Fraction of the scene that must be near white for the white patch to be used."""
+    white_reflectance: float = 0.9
+    """Reflectance of a white surface (paper, paint, a studio backdrop)."""
+    scene_reflectance: float = 0.18
+    """Mean reflectance of a scene (grey world; the photographic mid-grey)."""
+    minkowski_p: float = 6.0
+    """Shades-of-grey norm for the scene's colour (1 = grey world, inf = max-RGB)."""
+    duv_sigma: float = 0.006
+    """Distance from the Planckian locus (CIE 1960 uv) at which the scene's colour keeps exp(-1/2) weight."""
+    neutral_cct: float = 6504.0
+    """The photo's white point as a colour temperature (sRGB's D65)."""
+    cct_range: tuple[float, float] = (2000.0, 12000.0)
+    """Colour temperatures an estimate may take."""
+    min_scene_fraction: float = 0.05
+    """Below this fraction of usable scene pixels, fall back to the photo's white point."""
+    exposure_sigma: float = 0.5
+    """Spread (natural log) of a photo's white level around its white point W = 1."""
+    white_patch_sigma: float = 0.2
+    """Spread (natural log) of the white-patch level (white surfaces differ in reflectance and light)."""
+    grey_world_sigma: float = 0.7
+    """Spread (natural log) of the grey-world level (scenes' mean reflectance differs by about a stop)."""
+
+
+@dataclass(frozen=True)
+class IlluminantEstimate:
+    """W and where it came from (written to params.json)."""
+
+    white: np.ndarray  # [3] linear RGB a white surface facing the key light shows
+    cct: float  # correlated colour temperature (K) of the light
+    source: str  # "white patch", "grey world" or "fallback"
+    colour_weight: float  # in [0, 1]: how much of the colour came from the scene (the rest: the white point)
+    scene_pixels: int  # usable pixels outside the face
+
+    def record(self) -> dict:
+        return {"white": [round(float(v), 5) for v in self.white], "cct": round(self.cct, 1),
+                "source": self.source, "colour_weight": round(self.colour_weight, 4),
+                "scene_pixels": self.scene_pixels}
+
+
+def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarray],
+                        config: IlluminantConfig = IlluminantConfig()) -> IlluminantEstimate:
+    """Frames [H, W, 3] sRGB in [0, 1] and the face's coverage [H, W] per frame -> the white level W."""
+    pixels = np.concatenate([_scene_pixels(f, m, config) for f, m in zip(frames_srgb, face_masks, strict=True)])
+    total = sum(m.size for m in face_masks)
+    linear = srgb_to_linear(pixels)
+    luminance = linear @ LUMINANCE
+    usable = (pixels.max(-1) < config.clipped) & (luminance >= config.dark)
+    if usable.sum() < config.min_scene_fraction * total:
+        return IlluminantEstimate(np.ones(3), config.neutral_cct, "fallback", 0.0, int(usable.sum()))
+    white = (pixels.min(-1) >= config.white_threshold) | (pixels.max(-1) >= config.clipped)
+    if white.mean() >= config.white_fraction:
+        colour = np.median(np.where(pixels[white] >= config.clipped, 1.0, linear[white]), axis=0)
+        level, sigma = float(colour @ LUMINANCE) / config.white_reflectance, config.white_patch_sigma
+        source = "white patch"
+    else:
+        colour = np.power(np.mean(linear[usable] ** config.minkowski_p, axis=0), 1.0 / config.minkowski_p)
+        level = max(float(luminance[usable].mean()) / config.scene_reflectance,
+                    float(np.percentile(luminance[usable], 99)))
+        sigma, source = config.grey_world_sigma, "grey world"
+    cct, weight = plausible_cct(colour, config)
+    level = _with_exposure_prior(level, sigma, config.exposure_sigma)
+    return IlluminantEstimate(level * planckian_rgb(cct, config.neutral_cct), cct, source, weight,
+                              int(usable.sum()))
+
+
+def _with_exposure_prior(level: float, sigma: float, exposure_sigma: float) -> float:
+    """Precision-weighted mean in log space of the scene's level and the photo's white point (log 1 = 0)."""
+    weight = sigma**-2 / (sigma**-2 + exposure_sigma**-2)
+    return float(np.exp(weight * np.log(level)))
+
+
+def _scene_pixels(frame: np.ndarray, face: np.ndarray, config: IlluminantConfig) -> np.ndarray:
+    """[N, 3] sRGB pixels outside the dilated face."""
+    face = np.asarray(face, dtype=bool)
+    size = np.sqrt(max(face.sum(), 1.0))
+    iterations = max(1, int(round(config.face_margin * size)))
+    grown = ndimage.binary_dilation(face, iterations=iterations) if face.any() else face
+    return frame[~grown].reshape(-1, 3)
+
+
+def plausible_cct(linear_rgb: np.ndarray, config: IlluminantConfig) -> tuple[float, float]:
+    """The colour temperature of a light of colour ``linear_rgb`` [3] and the weight the scene's colour got:
+    the scene's CCT where it lies on the Planckian locus, the white point's where it lies far off it."""
+    from colour import XYZ_to_xy, xy_to_UCS_uv
+    from colour.temperature import uv_to_CCT_Ohno2013
+
+    xyz = _rgb_to_xyz() @ np.maximum(np.asarray(linear_rgb, dtype=np.float64), 1e-6)
+    cct, duv = uv_to_CCT_Ohno2013(xy_to_UCS_uv(XYZ_to_xy(xyz)))
+    weight = float(np.exp(-0.5 * (duv / config.duv_sigma) ** 2))
+    low, high = config.cct_range
+    mired = weight * 1e6 / float(np.clip(cct, low, high)) + (1.0 - weight) * 1e6 / config.neutral_cct
+    return 1e6 / mired, weight
+
+
+def planckian_rgb(cct: float, neutral_cct: float = 6504.0) -> np.ndarray:
+    """[3] linear sRGB of a Planckian light at ``cct`` relative to one at ``neutral_cct`` (which is (1, 1, 1)),
+    scaled to unit luminance."""
+    rgb = _planck_linear_rgb(cct) / _planck_linear_rgb(neutral_cct)
+    return rgb / float(rgb @ LUMINANCE)
+
+
+def _planck_linear_rgb(cct: float) -> np.ndarray:
+    from colour import UCS_uv_to_xy, xy_to_XYZ
+    from colour.temperature import CCT_to_uv_Ohno2013
+
+    xyz = xy_to_XYZ(UCS_uv_to_xy(CCT_to_uv_Ohno2013(np.array([cct, 0.0]))))
+    return np.linalg.solve(_rgb_to_xyz(), xyz)
+
+
+def _rgb_to_xyz() -> np.ndarray:
+    from colour.models import RGB_COLOURSPACE_sRGB
+
+    return np.asarray(RGB_COLOURSPACE_sRGB.matrix_RGB_to_XYZ, dtype=np.float64)

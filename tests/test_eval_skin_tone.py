@@ -1,0 +1,122 @@
+"""The ITA measure: known CIELAB values, the UV boxes, lit-skin selection, and the benchmark's figures."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from skimage.color import lab2rgb
+
+from deface.eval.skin_tone import (
+    TONE_BOXES,
+    in_tone_boxes,
+    ita_degrees,
+    ita_of_srgb,
+    lit_skin,
+    photo_tone,
+    pixel_uvs,
+    texture_ita,
+    texture_tone_mask,
+)
+from deface.eval.tone_benchmark import TonePhoto, read_manifest, summary
+
+
+@pytest.mark.parametrize("lab, expected", [((50.0, 10.0, 20.0), 0.0), ((60.0, 5.0, 10.0), 45.0),
+                                           ((40.0, 12.0, 10.0), -45.0), ((70.0, 8.0, 0.0), 90.0),
+                                           ((67.32, 10.0, 10.0), 60.0)])
+def test_ita_of_known_cielab_values(lab, expected):
+    assert ita_degrees(np.array(lab)) == pytest.approx(expected, abs=0.01)
+
+
+def test_ita_of_srgb_pixels_round_trips_through_cielab():
+    """Skin colours made in CIELAB and encoded to sRGB read back with their ITA (median of a noisy patch)."""
+    rng = np.random.default_rng(0)
+    for ita in (-30.0, 0.0, 25.0, 55.0):
+        angle = np.radians(ita)
+        lab = np.array([50 + 22 * np.sin(angle), 11.0, 22 * np.cos(angle)])
+        patch = lab + rng.normal(0, 0.5, (400, 3))
+        srgb = lab2rgb(patch[None])[0]
+        assert ita_of_srgb(srgb) == pytest.approx(ita, abs=1.0)
+
+
+def test_tone_boxes_are_cheeks_and_forehead_of_the_layout():
+    mask = texture_tone_mask(200, 200)
+    assert mask[:, :100].sum() == pytest.approx(mask[:, 100:].sum(), rel=0.05)  # both cheeks, mirrored
+    rows = np.nonzero(mask.any(1))[0]
+    assert rows.min() == pytest.approx(200 * TONE_BOXES["forehead"][2], abs=1)  # forehead on top (y down)
+    assert rows.max() == pytest.approx(200 * TONE_BOXES["left_cheek"][3], abs=1.5)
+    assert in_tone_boxes(np.array([0.5, 1 - 0.17]))  # forehead centre, v up
+    assert not in_tone_boxes(np.array([0.5, 0.5]))  # the nose
+
+
+def test_texture_ita_reads_only_the_boxes():
+    lab_skin = np.array([45.0, 12.0, 18.0])  # ITA -15.5
+    texture = np.ones((128, 128, 3))  # white outside the boxes must not count
+    texture[texture_tone_mask(128, 128)] = lab2rgb(lab_skin[None, None])[0, 0]
+    assert texture_ita(texture) == pytest.approx(float(ita_degrees(lab_skin)), abs=0.5)
+
+
+def test_lit_skin_leaves_out_shadow_and_highlights():
+    lit = np.full((100, 3), [0.7, 0.5, 0.4])
+    shadow = np.full((60, 3), [0.35, 0.25, 0.2])  # half as bright in sRGB: ~4.6x darker in luminance
+    clipped = np.full((10, 3), [1.0, 0.9, 0.8])
+    keep = lit_skin(np.concatenate([lit, shadow, clipped]))
+    assert keep[:100].all() and not keep[100:].any()
+
+
+def test_photo_tone_measures_the_pixels_showing_the_boxes():
+    """A photo whose forehead pixels hold one skin colour and everything else another."""
+    uv = np.zeros((64, 64, 2))
+    uv[..., 0] = np.linspace(0, 1, 64)[None, :]
+    uv[..., 1] = np.linspace(1, 0, 64)[:, None]
+    skin = lab2rgb(np.array([[[62.0, 11.0, 15.0]]]))[0, 0]
+    photo = np.full((64, 64, 3), 0.1)
+    inside = in_tone_boxes(uv)
+    photo[inside] = skin
+    covered = np.ones((64, 64), bool)
+    tone = photo_tone(photo, uv, covered, covered)
+    assert tone.pixels == inside.sum()
+    assert tone.ita == pytest.approx(float(ita_degrees(np.array([62.0, 11.0, 15.0]))), abs=0.5)
+    assert np.isnan(photo_tone(photo, uv, covered, np.zeros_like(covered)).ita)  # no skin: no tone
+
+
+def test_pixel_uvs_interpolate_the_mesh_uvs(shared):
+    from deface.models import load_face_model
+    from deface.render.camera import Camera
+    from deface.render.mesh import Mesh
+    from deface.render.renderer import Renderer
+
+    model = load_face_model("ict")
+    mesh = Mesh.create(model.mean_shape, model.triangles, model.uvs, model.triangle_uvs)
+    camera = Camera.frontal(64, 64, distance=60.0, fov_degrees=34.0)
+    fragments = Renderer().rasterize(mesh, camera)
+    uv = pixel_uvs(fragments, mesh)
+    covered = fragments.mask.numpy() > 0
+    assert uv[covered].min() >= 0 and uv[covered].max() <= 1 and (uv[~covered] == 0).all()
+    centre = uv[32, 32]  # the nose: on the midline of the symmetric layout
+    assert centre[0] == pytest.approx(0.5, abs=0.02)
+    assert torch.is_tensor(fragments.mask)
+
+
+def test_manifest_errors_are_one_line(tmp_path):
+    with pytest.raises(ValueError, match="no MANIFEST.tsv"):
+        read_manifest(tmp_path)
+    (tmp_path / "MANIFEST.tsv").write_text("file\tgroup\na.png\tdark\n")
+    with pytest.raises(ValueError, match="missing column"):
+        read_manifest(tmp_path)
+    (tmp_path / "MANIFEST.tsv").write_text("file\ttone_group\na.png\tdark\n")
+    with pytest.raises(ValueError, match="missing a.png"):
+        read_manifest(tmp_path)
+
+
+def test_summary_figures_follow_their_definitions():
+    photos = [TonePhoto(f"{g}{i}.png", g, ita) for g, itas in
+              (("dark", (-20.0, 0.0)), ("medium", (20.0, 30.0)), ("light", (50.0, 60.0))) for i, ita in enumerate(itas)]
+    kept = {p.stem: {"albedo_ita": p.gt_ita + 2.0, "photo_ita": float("nan")} for p in photos}
+    figures = summary(photos, kept)
+    assert figures["mae"] == pytest.approx(2.0) and figures["bias"] == pytest.approx(0.0)
+    assert figures["slope"] == pytest.approx(1.0) and figures["spearman"] == pytest.approx(1.0)
+    flat = {p.stem: {"albedo_ita": 45.0, "photo_ita": float("nan")} for p in photos}
+    figures = summary(photos, flat)  # one tone for everybody
+    assert figures["slope"] == pytest.approx(0.0, abs=1e-9)
+    assert figures["group_mae"]["dark"] == pytest.approx(55.0) and figures["bias"] > 15
