@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import pickle
 
 import h5py
@@ -46,6 +47,11 @@ def bfm_dir(tmp_path):
         f["expression/model/pcaBasis"] = _orthonormal(rng, v3, 5)
         f["expression/model/pcaVariance"] = np.linspace(100.0, 5.0, 5).astype(np.float32)
         f["shape/representer/cells"] = tris.T.astype(np.uint32)
+        # Named landmarks as in the real file (positions arbitrary here: grid vertices).
+        names = ["center.nose.tip", "center.chin.tip", "right.eye.corner_outer", "left.eye.corner_outer",
+                 "right.lips.corner", "left.lips.corner"]
+        entries = [{"id": n, "coordinates": verts[i * 7].tolist()} for i, n in enumerate(names)]
+        f.create_dataset("metadata/landmarks/json", data=json.dumps(entries), dtype=h5py.string_dtype())
     colour = np.tile([0.6, 0.4, 0.3], len(verts)) * (1 + 0.2 * verts[:, 0:1].repeat(3, 1).reshape(-1) / 70)
     with h5py.File(tmp_path / "albedomm/albedoModel2020_face12_albedoPart.h5", "w") as f:
         for kind, scale in (("diffuseAlbedo", 1.0), ("specularAlbedo", 0.1)):

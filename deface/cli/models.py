@@ -69,6 +69,20 @@ def list_files(models: Path | None = MODELS_OPTION) -> None:
     statuses = [registry.status(e, models) for e in registry.MODEL_FILES]
     console.print(_table(statuses, show_checksum=False))
     console.print("searched: " + ", ".join(str(d) for d in models_dir_candidates(models)), highlight=False)
+    _bfm_report(models)
+
+
+def _bfm_report(models: Path | None) -> str | None:
+    """Print what `fit --model bfm` would use; returns the problem that would stop it, if any."""
+    from deface.models.bfm import setup_report
+
+    try:
+        lines, problem = setup_report(models)
+    except (OSError, ValueError) as error:  # an unreadable h5 file or broken metadata
+        lines, problem = [], str(error)
+    for line in lines:
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
+    return problem
 
 
 @models_app.command("check")
@@ -81,6 +95,10 @@ def check(
     statuses = [registry.status(e, models, verify=True) for e in entries]
     console.print(_table(statuses, show_checksum=True))
     problems = [st.problem for st in statuses if st.problem and (st.entry.required or names)]
+    if any(st.entry.group == "bfm" for st in statuses):
+        bfm_problem = _bfm_report(models)
+        if bfm_problem and names:
+            problems.append(bfm_problem)
     for st in statuses:
         if st.problem and not (st.entry.required or names):
             console.print(f"note (optional): {st.problem}", markup=False, highlight=False, soft_wrap=True)

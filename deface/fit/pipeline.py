@@ -105,7 +105,7 @@ def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | 
     np.random.seed(config.seed)
     log = log or FitLog()
     model = load_face_model(config.model, models_dir)
-    context = _stage1(model, target, config, log)
+    context = _stage1(model, target, config, log, models_dir)
     optional = _face_classifier(context, config, models_dir, log)
     if config.tone.scene_light_prior:
         context.illuminant = _scene_illuminant(context, config)
@@ -124,9 +124,9 @@ def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | 
     return FitResult(context, stage3.frozen, stage3.textures, stage3.initial, log, optional)
 
 
-def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog) -> StageContext:
+def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog, models_dir=None) -> StageContext:
     log.start("stage 1")
-    corr = correspondence_for(model)
+    corr = correspondence_for(model, models_dir=models_dir)
     result = fit_landmarks(model, corr, target.landmarks, target.size,
                            _stage1_config(config.iterations.stage1))
     log.stop("stage 1")

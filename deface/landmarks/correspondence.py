@@ -5,8 +5,12 @@ How it is built (once per model, cached in ``~/.cache/deface/correspondence/<mod
 1. The canonical MediaPipe mesh (``mediapipe-canonical/face_model_with_iris.obj``, 478 vertices in
    MediaPipe's landmark order, cm, +x subject's left, +y up, +z toward the viewer: the same frame as
    the face models) is aligned to the model's mean shape by a similarity transform (Umeyama) on
-   anchor pairs: the model's iBUG-68 landmark vertices (brows, nose, eye corners and lids, outer lips,
-   chin) and the MediaPipe points with the same meaning (:data:`IBUG68_TO_MEDIAPIPE`).
+   anchor pairs (:func:`model_anchors`): the model's iBUG-68 landmark vertices (brows, nose, eye corners
+   and lids, outer lips, chin; ICT) and the MediaPipe points with the same meaning
+   (:data:`IBUG68_TO_MEDIAPIPE`), or the model's own named 3D landmarks (BFM 2017's
+   ``metadata/landmarks/json``: eye corners and lids, brows, nose tip, subnasale, lip corners and
+   contour, chin tip) and their MediaPipe equivalents (:data:`NAMED_TO_MEDIAPIPE`), snapped onto the
+   mean surface.
 2. The similarity is refined by trimmed ICP (canonical vertices -> closest model surface points,
    the 20% worst pairs dropped each round).
 3. A non-rigid step: a smoothed thin-plate-spline warp, fitted on the anchor pairs, moves the
@@ -14,6 +18,10 @@ How it is built (once per model, cached in ``~/.cache/deface/correspondence/<mod
    have different proportions; without it eye and mouth corners would land a few mm off).
 4. Every warped MediaPipe point is projected onto the closest point of the model surface, giving
    (triangle id, barycentrics), so landmarks move with the mesh under identity and expression.
+
+A model may instead come with a user-supplied correspondence file (``FaceModel.correspondence_file``,
+:func:`read_correspondence_file`, format in docs/bfm.md): its points replace steps 1-4, and the point
+choices below apply to them the same way (points the file does not list are not used).
 
 Which points are used in L_lan (468 + 10 iris points detected):
 - the 10 iris points are excluded: they lie on the eyeballs, which are not part of the model surface;
@@ -46,7 +54,7 @@ from deface.models.base import FaceModel
 from deface.paths import ModelFileError, find_model_file, user_cache_dir
 
 CANONICAL_MESH = "mediapipe-canonical/face_model_with_iris.obj"
-ALGORITHM_VERSION = "1"  # bump to invalidate cached correspondences when the construction changes
+ALGORITHM_VERSION = "2"  # bump to invalidate cached correspondences when the construction changes
 IRIS_IDS = np.arange(468, 478)
 MAX_TANGENT_ANGLE_DEG = 60.0  # beyond this the projection lands on an opening's rim: outside
 MIN_OUTSIDE_DISTANCE_CM = 0.1
@@ -99,6 +107,39 @@ IBUG68_TO_MEDIAPIPE = {
     58: 84,
     59: 181,  # lower outer lip
 }
+
+
+# BFM 2017 landmark name (``metadata/landmarks/json`` ids; "right" = the subject's right) -> MediaPipe index
+# with the same meaning. Left out: ears, trichion and pupils (no MediaPipe surface equivalent), inner lips
+# (the no-mouth model closes them onto one seam) and nose wings (their definition differs between the two).
+NAMED_TO_MEDIAPIPE = {
+    "center.chin.tip": 152,
+    "center.nose.tip": 4,
+    "center.nose.attachement_to_philtrum": 2,
+    "center.lips.upper.outer": 0,
+    "center.lips.lower.outer": 17,
+    "right.lips.corner": 61,
+    "left.lips.corner": 291,
+    "right.lips.philtrum_ridge": 37,
+    "left.lips.philtrum_ridge": 267,
+    "right.eye.corner_outer": 33,
+    "right.eye.corner_inner": 133,
+    "left.eye.corner_inner": 362,
+    "left.eye.corner_outer": 263,
+    "right.eye.top": 159,
+    "right.eye.bottom": 145,
+    "left.eye.top": 386,
+    "left.eye.bottom": 374,
+    "right.eyebrow.inner_upper": 107,
+    "left.eyebrow.inner_upper": 336,
+    "right.eyebrow.bend.upper": 105,
+    "left.eyebrow.bend.upper": 334,
+    "right.eyebrow.inner_lower": 55,
+    "left.eyebrow.inner_lower": 285,
+    "right.eyebrow.bend.lower": 52,
+    "left.eyebrow.bend.lower": 282,
+}
+MIN_NAMED_ANCHORS = 6  # similarity + TPS need a few well-spread pairs; BFM 2017 has 25 of the names above
 
 
 @dataclass(frozen=True)
@@ -244,18 +285,36 @@ def closest_point_on_triangles(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     return result
 
 
+def named_anchor_ids(names: tuple[str, ...] | list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Which named landmarks have a MediaPipe equivalent: (indices into ``names`` [K], MediaPipe ids [K])."""
+    pairs = [(i, NAMED_TO_MEDIAPIPE[name]) for i, name in enumerate(names) if name in NAMED_TO_MEDIAPIPE]
+    return np.array([i for i, _ in pairs], np.int64), np.array([m for _, m in pairs], np.int64)
+
+
+def model_anchors(model: FaceModel) -> tuple[np.ndarray, np.ndarray]:
+    """Anchor pairs of the alignment: MediaPipe ids [K] and model points [K, 3] (cm, on the mean surface)."""
+    if model.landmarks_68 is not None:
+        ibug = np.array(list(IBUG68_TO_MEDIAPIPE.keys()))
+        mp_ids = np.array(list(IBUG68_TO_MEDIAPIPE.values()))
+        return mp_ids, model.mean_shape[model.landmarks_68[ibug]].astype(np.float64)
+    rows, mp_ids = named_anchor_ids(model.landmark_names)
+    if model.landmark_points is None or len(rows) < MIN_NAMED_ANCHORS:
+        raise ValueError(
+            f"model '{model.name}' has {len(rows)} landmarks with a MediaPipe equivalent (iBUG-68 vertices or "
+            f"named points, need {MIN_NAMED_ANCHORS}): cannot anchor the MediaPipe correspondence; "
+            "supply a correspondence file (docs/bfm.md)"
+        )
+    surface = SurfaceQuery(model.mean_shape.astype(np.float64), model.triangles)
+    snapped, _, _ = surface.closest(model.landmark_points[rows].astype(np.float64))
+    return mp_ids, snapped
+
+
 def align_canonical(model: FaceModel, canonical: np.ndarray, icp_rounds: int = 10) -> np.ndarray:
     """Canonical vertices [478, 3] moved onto the model's mean shape (similarity, ICP, TPS warp)."""
     from scipy.interpolate import RBFInterpolator
 
-    if model.landmarks_68 is None:
-        raise ValueError(
-            f"model '{model.name}' has no landmarks_68: cannot anchor the MediaPipe correspondence"
-        )
+    mp_ids, anchors_model = model_anchors(model)
     surface = SurfaceQuery(model.mean_shape.astype(np.float64), model.triangles)
-    ibug = np.array(list(IBUG68_TO_MEDIAPIPE.keys()))
-    mp_ids = np.array(list(IBUG68_TO_MEDIAPIPE.values()))
-    anchors_model = model.mean_shape[model.landmarks_68[ibug]].astype(np.float64)  # [K, 3]
     similarity = umeyama(canonical[mp_ids], anchors_model)
 
     # Trimmed ICP on the face interior (no contour, no irises), anchors kept in the fit.
@@ -298,6 +357,7 @@ class _Projection:
     barycentrics: np.ndarray  # [478, 3]
     distance: np.ndarray  # [478] cm from the warped point to the surface
     outside: np.ndarray  # [478] bool, projects onto an opening's rim
+    listed: np.ndarray  # [478] bool, has a point at all (False: not in a user-supplied file)
 
 
 def project_onto_model(model: FaceModel, points: np.ndarray) -> _Projection:
@@ -310,14 +370,81 @@ def project_onto_model(model: FaceModel, points: np.ndarray) -> _Projection:
     cosine = np.abs((offset * normals).sum(1)) / np.maximum(distance, 1e-9)
     outside = (cosine < np.cos(np.radians(MAX_TANGENT_ANGLE_DEG))) & (distance > MIN_OUTSIDE_DISTANCE_CM)
     return _Projection(
-        triangle_ids.astype(np.int64), bary.astype(np.float32), distance.astype(np.float32), outside
+        triangle_ids.astype(np.int64),
+        bary.astype(np.float32),
+        distance.astype(np.float32),
+        outside,
+        np.ones(len(points), bool),
     )
+
+
+def read_correspondence_file(path: str | os.PathLike, model: FaceModel) -> _Projection:
+    """A user-supplied MediaPipe -> model correspondence (text, docs/bfm.md) as a projection on ``model``.
+
+    Each row: ``mediapipe_id vertex_id`` (NextFace's ``landmark_62_mp.txt`` layout), or ``mediapipe_id v0 v1 v2
+    b0 b1 b2`` (a point inside a triangle by its corner vertex ids and barycentrics); whitespace-separated,
+    ``#`` starts a comment. Vertex ids index the model's vertices (the h5 file's order).
+    """
+    path = Path(path)
+    try:
+        table = np.loadtxt(path, ndmin=2, comments="#")
+    except (OSError, ValueError) as error:
+        raise ValueError(f"{path}: not a whitespace-separated table of numbers ({error})") from None
+    if table.shape[1] not in (2, 7) or len(table) == 0:
+        raise ValueError(
+            f"{path}: expected rows 'mediapipe_id vertex_id' or 'mediapipe_id v0 v1 v2 b0 b1 b2', "
+            f"got {table.shape[1]} columns"
+        )
+    ids = np.rint(table[:, :-3] if table.shape[1] == 7 else table).astype(np.int64)
+    corners = ids[:, 1:4] if table.shape[1] == 7 else np.repeat(ids[:, 1:2], 3, 1)
+    bary = table[:, 4:7] if table.shape[1] == 7 else np.tile([1.0, 0.0, 0.0], (len(table), 1))
+    _check_rows(path, ids[:, 0], corners, bary, model.num_vertices)
+    triangle_ids, bary = _locate(path, model.triangles, corners, bary)
+    projection = _Projection(
+        np.zeros(478, np.int64),
+        np.tile(np.array([1.0, 0.0, 0.0], np.float32), (478, 1)),
+        np.zeros(478, np.float32),
+        np.zeros(478, bool),
+        np.zeros(478, bool),
+    )
+    projection.triangle_ids[ids[:, 0]] = triangle_ids
+    projection.barycentrics[ids[:, 0]] = bary
+    projection.listed[ids[:, 0]] = True
+    return projection
+
+
+def _check_rows(path: Path, mp_ids: np.ndarray, corners: np.ndarray, bary: np.ndarray, num_vertices: int):
+    if mp_ids.min() < 0 or mp_ids.max() >= 478 or len(np.unique(mp_ids)) != len(mp_ids):
+        raise ValueError(f"{path}: MediaPipe ids must be distinct and in 0..477")
+    if corners.min() < 0 or corners.max() >= num_vertices:
+        raise ValueError(f"{path}: vertex id {corners.max()} out of range (the model has {num_vertices})")
+    if (bary < -1e-6).any() or not np.allclose(bary.sum(1), 1.0, atol=1e-3):
+        raise ValueError(f"{path}: barycentrics must be >= 0 and sum to 1 per row")
+
+
+def _locate(path: Path, triangles: np.ndarray, corners: np.ndarray, bary: np.ndarray):
+    """For each row, a triangle holding its corners with non-zero weight -> (triangle ids [N], bary [N, 3])."""
+    candidates = np.flatnonzero(np.isin(triangles, corners).any(1))
+    local = triangles[candidates]  # [C, 3]
+    triangle_ids, out = np.zeros(len(corners), np.int64), np.zeros((len(corners), 3), np.float32)
+    for row, (vertices, weights) in enumerate(zip(corners, bary, strict=True)):
+        needed = np.unique(vertices[weights > 0])
+        holds = np.isin(local, needed).sum(1) == len(needed)
+        if not holds.any():
+            raise ValueError(f"{path}: row {row + 1}: vertices {vertices.tolist()} are not one triangle's corners")
+        best = int(np.argmax(holds))
+        triangle_ids[row] = candidates[best]
+        for vertex, weight in zip(vertices, weights, strict=True):
+            out[row, local[best] == vertex] += weight
+    return triangle_ids, out
 
 
 def _cache_path(model: FaceModel, canonical: np.ndarray) -> Path:
     digest = hashlib.sha1()
-    for array in (model.mean_shape, model.triangles, model.landmarks_68, canonical):
-        digest.update(np.ascontiguousarray(array).tobytes())
+    anchors = (model.landmarks_68, model.landmark_points, np.array(model.landmark_names, dtype=str))
+    for array in (model.mean_shape, model.triangles, *anchors, canonical):
+        if array is not None:
+            digest.update(np.ascontiguousarray(array).tobytes())
     digest.update(ALGORITHM_VERSION.encode())
     return user_cache_dir().parent / "correspondence" / f"{model.name}-{digest.hexdigest()[:16]}.npz"
 
@@ -326,7 +453,9 @@ _PROJECTIONS: dict[Path, _Projection] = {}  # in-process cache, keyed like the f
 
 
 def projection_for(model: FaceModel, models_dir: str | os.PathLike | None = None) -> _Projection:
-    """All 478 points projected onto the model, from the cache or built (about a second) and cached."""
+    """All 478 points on the model: the model's correspondence file, else built (about a second) and cached."""
+    if model.correspondence_file:
+        return read_correspondence_file(model.correspondence_file, model)
     canonical, _ = load_canonical_mesh(models_dir)
     path = _cache_path(model, canonical)
     if path not in _PROJECTIONS:
@@ -338,9 +467,7 @@ def _load_or_build(model: FaceModel, canonical: np.ndarray, path: Path) -> _Proj
     if path.exists():
         try:
             data = np.load(path)
-            return _Projection(
-                *(data[key] for key in ("triangle_ids", "barycentrics", "distance", "outside"))
-            )
+            return _Projection(*(data[key] for key in _Projection.__dataclass_fields__))
         except (OSError, KeyError, ValueError):
             pass  # a broken cache file is rebuilt below
     projection = project_onto_model(model, align_canonical(model, canonical))
@@ -365,7 +492,7 @@ def correspondence_for(
     weights[face_oval_ids()] = contour_weight
     weights[IRIS_IDS] = 0.0
     weights[inner_lip_ids()] = 0.0
-    weights[projection.outside] = 0.0
+    weights[projection.outside | ~projection.listed] = 0.0
     used = np.flatnonzero(weights > 0)
     return Correspondence(
         triangle_ids=projection.triangle_ids[used],
@@ -376,9 +503,9 @@ def correspondence_for(
     )
 
 
-def describe(model: FaceModel) -> dict[str, int]:
-    """Counts of the choices above for a model: used, iris, outside, contour points."""
-    projection = projection_for(model)
+def describe(model: FaceModel, models_dir: str | os.PathLike | None = None) -> dict[str, int]:
+    """Counts of the choices above for a model: used, iris, outside, contour, unlisted points."""
+    projection = projection_for(model, models_dir)
     oval = face_oval_ids()
     outside = np.flatnonzero(projection.outside)
     return {
@@ -387,5 +514,6 @@ def describe(model: FaceModel) -> dict[str, int]:
         "inner_lip_excluded": len(INNER_LIP_IDS),
         "outside_excluded": int(len(np.setdiff1d(outside, np.concatenate([IRIS_IDS, oval, INNER_LIP_IDS])))),
         "contour": len(oval),
-        "used_without_contour": len(correspondence_for(model, 0.0)),
+        "unlisted": int((~projection.listed).sum()),
+        "used_without_contour": len(correspondence_for(model, 0.0, models_dir)),
     }

@@ -81,6 +81,9 @@ class FaceModel:
     triangle_uvs: np.ndarray  # [F, 3] int64 indices into uvs (a vertex may have several UVs: seams)
     albedo: AlbedoModel | None
     landmarks_68: np.ndarray | None = None  # [68] vertex ids of the iBUG/Multi-PIE 68 points, if known
+    landmark_names: tuple[str, ...] = ()  # the model's own named 3D landmarks (BFM: "center.nose.tip", ...)
+    landmark_points: np.ndarray | None = None  # [L, 3] float32 cm, model frame: where landmark_names are
+    correspondence_file: str | None = None  # user-supplied MediaPipe -> model file, used instead of building one
 
     @property
     def num_vertices(self) -> int:

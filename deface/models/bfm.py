@@ -3,7 +3,12 @@
 Files (not redistributable; see ``deface models list``):
 - ``bfm2017/model2017-1_face12_nomouth.h5``: ``shape/model/{mean, pcaBasis, pcaVariance}`` ([3V], [3V, 199],
   [199]), ``expression/model/{pcaBasis, pcaVariance}`` ([3V, 100], [100]), ``shape/representer/cells``
-  ([3, F] triangle vertex ids); positions flattened x, y, z per vertex, in millimetres.
+  ([3, F] triangle vertex ids); positions flattened x, y, z per vertex, in millimetres. Its named 3D landmarks
+  are ``metadata/landmarks/json``: one UTF-8 JSON string, a list of ``{"id": "center.nose.tip",
+  "coordinates": [x, y, z], ...}`` in mm on the mean face (read by :func:`read_named_landmarks`); they anchor
+  the MediaPipe correspondence (:mod:`deface.landmarks.correspondence`).
+- optional, beside it: ``bfm2017/mediapipe_correspondence.txt`` (a user-supplied correspondence, used instead
+  of building one; format in docs/bfm.md) and ``bfm2017/uv_layout.obj`` (a UV layout on the BFM vertices).
 - ``albedomm/albedoModel2020_face12_albedoPart.h5``: ``diffuseAlbedo/model/{mean, pcaBasis, pcaVariance}`` and
   ``specularAlbedo/model/{...}``, per-vertex linear RGB on the same topology (145 components).
 
@@ -22,6 +27,7 @@ Conversions to the :class:`FaceModel` conventions:
 
 from __future__ import annotations
 
+import json
 import os
 import pickle
 from dataclasses import dataclass
@@ -32,10 +38,13 @@ import numpy as np
 
 from deface.models.base import AlbedoModel, FaceModel
 from deface.models.uvmap import coverage, rasterize_uv
-from deface.paths import ModelFileError, find_model_file
+from deface.paths import ModelFileError, find_model_file, models_dir_candidates
 
 BFM_FILE = "bfm2017/model2017-1_face12_nomouth.h5"
 ALBEDOMM_FILE = "albedomm/albedoModel2020_face12_albedoPart.h5"
+CORRESPONDENCE_FILE = "bfm2017/mediapipe_correspondence.txt"
+UV_LAYOUT_FILE = "bfm2017/uv_layout.obj"
+LANDMARKS_DATASET = "metadata/landmarks/json"
 MM_TO_CM = 0.1
 ALBEDOMM_ROUGHNESS = (
     0.4  # AlbedoMM has no roughness model; same default as the ICT prior (Weyrich et al. 2006)
@@ -49,7 +58,11 @@ class BFMConfig:
     texture_size: int = 256
     """Size of the UV maps AlbedoMM is splatted into (memory ~ 2*145*3*size^2*4 bytes)."""
     uv_file: str | None = None
-    """NextFace uvParametrization pickle or an OBJ with vt; None: cylindrical projection."""
+    """NextFace uvParametrization pickle or an OBJ with vt; None: ``bfm2017/uv_layout.obj`` from the models
+    directory if present, else the computed cylindrical projection."""
+    correspondence_file: str | None = None
+    """MediaPipe -> BFM correspondence (docs/bfm.md); None: ``bfm2017/mediapipe_correspondence.txt`` from the
+    models directory if present, else built from the file's landmark metadata."""
     num_identity: int | None = None
     """Keep the first N identity components (None: all)."""
     num_expression: int | None = None
@@ -163,42 +176,115 @@ def load_bfm(models_dir: str | os.PathLike | None = None, config: BFMConfig | No
     albedo_path = _require(
         ALBEDOMM_FILE, models_dir, "AlbedoMM", "https://github.com/waps101/AlbedoMM/releases"
     )
-    with h5py.File(bfm_path, "r") as bfm:
-        mean = np.asarray(bfm["shape/model/mean"], np.float64).reshape(-1, 3) * MM_TO_CM
-        identity = (
-            standard_normal_basis(
-                np.asarray(bfm["shape/model/pcaBasis"]), np.asarray(bfm["shape/model/pcaVariance"])
-            )
-            * MM_TO_CM
-        )
-        expression = (
-            standard_normal_basis(
-                np.asarray(bfm["expression/model/pcaBasis"]), np.asarray(bfm["expression/model/pcaVariance"])
-            )
-            * MM_TO_CM
-        )
-        cells = np.asarray(bfm["shape/representer/cells"], np.int64)
-    triangles = cells.T if cells.shape[0] == 3 else cells
-    if triangles.max() >= len(mean):
-        raise ValueError(f"{bfm_path}: cells index vertex {triangles.max()} of {len(mean)}")
-    triangles = orient_outward(np.ascontiguousarray(triangles), mean)
-    if config.uv_file:
-        uvs, triangle_uvs = load_uv_file(config.uv_file, len(mean), triangles)
+    geometry = _read_geometry(bfm_path)
+    mean, triangles = geometry["mean"], geometry["triangles"]
+    correspondence = _optional_file(config.correspondence_file, CORRESPONDENCE_FILE, models_dir)
+    if correspondence is None:
+        _check_anchors(bfm_path, geometry["landmark_names"], models_dir)
+    uv_file = _optional_file(config.uv_file, UV_LAYOUT_FILE, models_dir)
+    if uv_file:
+        uvs, triangle_uvs = load_uv_file(uv_file, len(mean), triangles)
     else:
         uvs, triangle_uvs = cylindrical_uvs(mean), triangles.copy()
     albedo = _load_albedomm(albedo_path, len(mean), triangles, uvs, triangle_uvs, config)
+    expression = geometry["expression"][: config.num_expression]
     return FaceModel(
         name="bfm",
         mean_shape=mean.astype(np.float32),
-        identity_basis=identity[: config.num_identity].astype(np.float32),
-        expression_basis=expression[: config.num_expression].astype(np.float32),
+        identity_basis=geometry["identity"][: config.num_identity].astype(np.float32),
+        expression_basis=expression.astype(np.float32),
         expression_prior="pca",
-        expression_names=tuple(f"pca{i:03d}" for i in range(len(expression[: config.num_expression]))),
+        expression_names=tuple(f"pca{i:03d}" for i in range(len(expression))),
         triangles=triangles,
         uvs=uvs,
         triangle_uvs=triangle_uvs,
         albedo=albedo,
         landmarks_68=None,
+        landmark_names=geometry["landmark_names"],
+        landmark_points=geometry["landmark_points"],
+        correspondence_file=None if correspondence is None else str(correspondence),
+    )
+
+
+def _read_geometry(path: Path) -> dict:
+    """Mean [V, 3] cm, identity [Ki, V, 3], expression [Ke, V, 3], outward triangles [F, 3], named landmarks."""
+    with h5py.File(path, "r") as bfm:
+        mean = np.asarray(bfm["shape/model/mean"], np.float64).reshape(-1, 3) * MM_TO_CM
+        identity = standard_normal_basis(
+            np.asarray(bfm["shape/model/pcaBasis"]), np.asarray(bfm["shape/model/pcaVariance"])
+        )
+        expression = standard_normal_basis(
+            np.asarray(bfm["expression/model/pcaBasis"]), np.asarray(bfm["expression/model/pcaVariance"])
+        )
+        cells = np.asarray(bfm["shape/representer/cells"], np.int64)
+        names, points = read_named_landmarks(bfm, path)
+    triangles = cells.T if cells.shape[0] == 3 else cells
+    if triangles.max() >= len(mean):
+        raise ValueError(f"{path}: cells index vertex {triangles.max()} of {len(mean)}")
+    return {
+        "mean": mean,
+        "identity": identity * MM_TO_CM,
+        "expression": expression * MM_TO_CM,
+        "triangles": orient_outward(np.ascontiguousarray(triangles), mean),
+        "landmark_names": names,
+        "landmark_points": points,
+    }
+
+
+def read_named_landmarks(h5: h5py.File, path: Path | str = "") -> tuple[tuple[str, ...], np.ndarray | None]:
+    """Names and points [L, 3] (cm) of ``metadata/landmarks/json``; ((), None) when the file has none.
+
+    The dataset is one UTF-8 JSON string (variable- or fixed-length, or raw bytes): a list of objects
+    ``{"id": name, "coordinates": [x, y, z], ...}`` in mm.
+    """
+    if LANDMARKS_DATASET not in h5:
+        return (), None
+    try:
+        entries = json.loads(_as_text(h5[LANDMARKS_DATASET][()]))
+        names = tuple(str(entry["id"]) for entry in entries)
+        points = np.asarray([entry["coordinates"] for entry in entries], np.float64).reshape(len(names), 3)
+    except (ValueError, TypeError, KeyError, UnicodeDecodeError) as error:
+        raise ValueError(
+            f"{path}: {LANDMARKS_DATASET} is not a JSON list of {{'id', 'coordinates': [x, y, z]}} ({error})"
+        ) from None
+    return names, (points * MM_TO_CM).astype(np.float32)
+
+
+def _as_text(raw) -> str:
+    """A scalar HDF5 string as read by h5py (bytes, str, or an array of bytes / uint8) -> str."""
+    if isinstance(raw, np.ndarray):
+        raw = raw.tobytes() if raw.dtype.kind in "iu" else raw.ravel()[0]
+    if isinstance(raw, bytes):
+        raw = bytes(raw).decode("utf-8")
+    return str(raw).rstrip("\x00")
+
+
+def _optional_file(explicit: str | None, relative: str, models_dir) -> Path | None:
+    """An explicitly given file (must exist), else ``relative`` under the models directories, else None."""
+    if explicit is None:
+        return find_model_file(relative, models_dir)
+    if not Path(explicit).is_file():
+        raise ModelFileError(f"file {explicit} not found")
+    return Path(explicit)
+
+
+def _check_anchors(path: Path, names: tuple[str, ...], models_dir) -> None:
+    """One-line error when the correspondence cannot be built from the file's landmark metadata."""
+    from deface.landmarks.correspondence import MIN_NAMED_ANCHORS, named_anchor_ids
+
+    usable = len(named_anchor_ids(names)[0])
+    if usable >= MIN_NAMED_ANCHORS:
+        return
+    what = (
+        f"lacks {LANDMARKS_DATASET}"
+        if not names
+        else f"has {len(names)} named landmarks but only {usable} with a MediaPipe equivalent "
+        f"(need {MIN_NAMED_ANCHORS})"
+    )
+    target = models_dir_candidates(models_dir)[0] / CORRESPONDENCE_FILE
+    raise ModelFileError(
+        f"{path} {what}: no MediaPipe-to-BFM correspondence can be built; supply one at {target} "
+        "(format: docs/bfm.md)"
     )
 
 
@@ -227,3 +313,34 @@ def _load_albedomm(path, num_vertices, triangles, uvs, triangle_uvs, config: BFM
         face_mask=coverage(uvs, triangle_uvs, config.texture_size, supersample=2),
         description=f"AlbedoMM (Smith et al. 2020) per-vertex model splatted to {config.texture_size}^2 UV",
     )
+
+
+def setup_report(models_dir: str | os.PathLike | None = None) -> tuple[list[str], str | None]:
+    """What ``deface fit --model bfm`` would use (landmark metadata, correspondence, UV layout), as lines, and
+    a one-line problem when the correspondence could not be had (None when it can)."""
+    from deface.landmarks.correspondence import MIN_NAMED_ANCHORS, named_anchor_ids
+
+    target = models_dir_candidates(models_dir)[0]
+    correspondence = find_model_file(CORRESPONDENCE_FILE, models_dir)
+    uv_layout = find_model_file(UV_LAYOUT_FILE, models_dir)
+    lines = [
+        "BFM correspondence: "
+        + (f"your file {correspondence}" if correspondence else
+           f"built from the landmark metadata and cached (or put your own at {target / CORRESPONDENCE_FILE})"),
+        "BFM UV layout: " + (f"your file {uv_layout}" if uv_layout else
+                             f"computed cylindrical layout (or put an OBJ with vt at {target / UV_LAYOUT_FILE})"),
+    ]
+    bfm_path = find_model_file(BFM_FILE, models_dir)
+    if bfm_path is None:
+        return [f"BFM landmark metadata: unknown ({BFM_FILE} not found)", *lines], None
+    with h5py.File(bfm_path, "r") as h5:
+        names, _ = read_named_landmarks(h5, bfm_path)
+    usable = len(named_anchor_ids(names)[0])
+    found = f"found, {len(names)} named points, {usable} with a MediaPipe equivalent" if names else "not found"
+    lines.insert(0, f"BFM landmark metadata ({LANDMARKS_DATASET} in {bfm_path}): {found}")
+    if correspondence is None and usable < MIN_NAMED_ANCHORS:
+        try:
+            _check_anchors(bfm_path, names, models_dir)
+        except ModelFileError as error:
+            return lines, str(error)
+    return lines, None

@@ -75,6 +75,28 @@ MODEL_FILES: tuple[ModelFile, ...] = (
         group="bfm",
     ),
     ModelFile(
+        key="bfm-correspondence",
+        relative_path="bfm2017/mediapipe_correspondence.txt",
+        description="your own MediaPipe-to-BFM correspondence for `--model bfm` (else built from the h5 file's "
+        "landmark metadata; format in docs/bfm.md)",
+        source="optional; e.g. NextFace's baselMorphableModel/landmark_62_mp.txt (github.com/abdallahdib/NextFace)",
+        licence="yours / its source's",
+        sha256=None,
+        required=False,
+        group="bfm-options",
+    ),
+    ModelFile(
+        key="bfm-uv",
+        relative_path="bfm2017/uv_layout.obj",
+        description="your own UV layout for `--model bfm`: an OBJ with vt on the BFM vertices (else a computed "
+        "cylindrical layout)",
+        source="optional; export the BFM mean with UVs from your tool of choice",
+        licence="yours",
+        sha256=None,
+        required=False,
+        group="bfm-options",
+    ),
+    ModelFile(
         key="facenet",
         relative_path="facenet/20180402-114759-vggface2.pt",
         description="FaceNet InceptionResnetV1 VGGFace2 classifier weights (human prior HP, optional)",
