@@ -10,7 +10,7 @@ import pytest
 import torch
 from skimage.color import lab2rgb
 
-from deface.eval.skin_tone import texture_ita
+from deface.models.ita import texture_ita
 from deface.eval.synthetic import directional_sh, true_landmarks
 from deface.fit import presets
 from deface.fit.config import override

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from deface.eval.skin_tone import ita_of_srgb
+from deface.models.ita import ita_of_srgb
 from deface.models.albedo_prior import JENSEN2001_SKIN1_RD, JENSEN2001_SKIN2_RD, AlbedoPriorConfig
 from deface.models.skin_tone import SkinToneAxis
 

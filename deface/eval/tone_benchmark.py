@@ -3,7 +3,7 @@
 A folder holds ``images/`` and ``MANIFEST.tsv`` (columns ``file`` and ``tone_group``; ``gt_ita`` when the true
 albedo's ITA is known, as in ``../shared/data/skin-tone-synth``). Every photo is fitted with each variant
 (the chosen preset, and NextFace as the baseline), cached per photo with its configuration, and scored by
-:mod:`deface.eval.skin_tone`: the ITA of the diffuse texture against the reference, which is ``gt_ita`` where
+:mod:`deface.models.ita`: the ITA of the diffuse texture against the reference, which is ``gt_ita`` where
 given and otherwise the ITA of the photo's lit skin over the same facial regions (a proxy: it includes the
 photo's light and exposure).
 
@@ -81,7 +81,7 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
     """Fit ``path``, write the fit and a neutral-light render into ``result_dir``, return the tone record."""
     import torch
 
-    from deface.eval.skin_tone import photo_tone, pixel_uvs, texture_ita
+    from deface.models.ita import photo_tone, pixel_uvs, texture_ita
     from deface.export.files import save_png
     from deface.export.outputs import write_fit
     from deface.fit.log import FitLog

@@ -13,6 +13,7 @@ import torch
 from deface.fit.config import FitConfig
 from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
+from deface.fit.scene_light import start_from_scene
 from deface.fit.scene import SceneParameters, initial_lights, topology_tensors
 from deface.fit.stage1 import Stage1Config, fit_landmarks
 from deface.fit.stage2 import FrameRender, StageContext, run_stage2
@@ -111,6 +112,7 @@ def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | 
         context.illuminant = _scene_illuminant(context, config)
         log.info(f"scene illuminant: {context.illuminant.source}, white level "
                  f"{np.round(context.illuminant.white, 3).tolist()}, {context.illuminant.cct:.0f} K")
+        start_from_scene(context)
     log.start("stage 2")
     run_stage2(context)
     log.stop("stage 2")

@@ -17,7 +17,14 @@ from deface.fit.decoupling import Decoupling
 from deface.fit.scene import SceneParameters, frame_geometry
 from deface.fit.target import FitTarget
 from deface.losses import decouple as decouple_losses
-from deface.losses.illuminant import front_directions, scene_light_terms
+from deface.losses.illuminant import (
+    LIT_SKIN_SHADING,
+    LUMINANCE_RGB,
+    exposure_term,
+    front_directions,
+    light_colour_term,
+    lit_skin_level,
+)
 from deface.losses.photometric import photometric_loss
 from deface.priors.illuminant import IlluminantEstimate
 from deface.render.mesh import Textures
@@ -36,6 +43,7 @@ class FrameRender:
     face_region: torch.Tensor  # [H, W] M_o
     face: torch.Tensor  # [H, W, 3] I_R
     region_probability: torch.Tensor | None = None  # [H, W] g (None without the field g)
+    diffuse: torch.Tensor | None = None  # [H, W, 3] screen-space diffuse albedo of the render
 
 
 class StageContext:
@@ -48,6 +56,7 @@ class StageContext:
         self.renderer = Renderer(target.render_config(config))
         self.shadow_caches = [ShadowTransferCache(self.renderer) for _ in range(target.num_frames)]
         self.illuminant: IlluminantEstimate | None = None  # the scene's light, set after stage 1
+        self.lit_skin: list[torch.Tensor] = []  # per frame [H, W] bool: lit cheeks and forehead (scene_light.py)
         self._directions = front_directions()
 
     def geometry(self, frame: int):
@@ -61,14 +70,22 @@ class StageContext:
         return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
 
     def scene_light_prior(self) -> torch.Tensor:
-        """The scene-light terms for the kept lights (0 when off or without an estimate)."""
+        """The scene-light colour term for the kept lights (0 when off or without an estimate)."""
         tone = self.config.tone
         if not tone.scene_light_prior or self.illuminant is None:
             return torch.zeros(())
         white = torch.as_tensor(self.illuminant.white, dtype=torch.float32)
-        colour, exposure = scene_light_terms(self.scene.lights[self.decoupling.kept], white, self._directions,
-                                             tone.colour_sigma, tone.exposure_sigma)
-        return tone.weight * (colour + exposure)
+        colour = light_colour_term(self.scene.lights[self.decoupling.kept], white, self._directions)
+        return tone.weight * colour / tone.colour_sigma**2
+
+    def lit_skin_exposure(self, frame: int, rendered: FrameRender) -> torch.Tensor:
+        """The scene-light level term of one frame: the light falling on its lit skin (0 when off)."""
+        tone, region = self.config.tone, self.lit_skin[frame] if self.lit_skin else None
+        if not tone.scene_light_prior or self.illuminant is None or region is None or rendered.diffuse is None:
+            return torch.zeros(())
+        level = lit_skin_level(rendered.face, rendered.diffuse, region)
+        target = float(self.illuminant.white @ LUMINANCE_RGB) * LIT_SKIN_SHADING
+        return tone.weight * exposure_term(level, target) / tone.exposure_sigma**2
 
     def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool, geometry=None) -> FrameRender:
         geometry = geometry or self.geometry(frame)
@@ -77,14 +94,15 @@ class StageContext:
         kept = self.decoupling.kept
         output = self.renderer.shade(geometry.mesh, geometry.camera, fragments, textures,
                                      self.scene.lights[kept], transfer)
-        return self.compose(frame, output.images, output.mask)
+        return self.compose(frame, output.images, output.mask, output.diffuse)
 
-    def compose(self, frame: int, light_images: torch.Tensor, coverage: torch.Tensor) -> FrameRender:
+    def compose(self, frame: int, light_images: torch.Tensor, coverage: torch.Tensor,
+                diffuse: torch.Tensor | None = None) -> FrameRender:
         light_masks = self.decoupling.light_masks(frame, coverage)
         probability = self.decoupling.region_probability(frame, coverage)
         face_region = self.decoupling.face_region(frame, coverage, self.target.face_classifier[frame], probability)
         face = (light_images * light_masks[..., None]).sum(0)
-        return FrameRender(light_images, coverage, light_masks, face_region, face, probability)
+        return FrameRender(light_images, coverage, light_masks, face_region, face, probability, diffuse)
 
     def _transfer(self, frame: int, mesh, refresh: bool):
         if not self.config.shadows:
@@ -149,6 +167,7 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool)
         total = total + weights.photometric * context.photometric(frame, rendered)
         total = total + weights.landmarks * context.target.landmark_loss(geometry, frame)
         total = total + _decoupling_terms(context, frame, rendered, before_ace)
+        total = total + context.lit_skin_exposure(frame, rendered)
     total = total / context.target.num_frames
     total = total + weights.sh_regulariser * scene.lights[context.decoupling.kept].pow(2).mean()
     total = total + weights.albedo_prior * scene.albedo.pow(2).mean()

@@ -95,7 +95,7 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
 def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, object]:
     """Shade a frozen frame with ``textures`` and the current kept lights; M_o stays frozen."""
     output = _shade(context, frame.geometry.mesh, frame.camera, frame.fragments, textures, frame.transfer)
-    rendered = context.compose(frame.index, output.images, output.mask)
+    rendered = context.compose(frame.index, output.images, output.mask, output.diffuse)
     rendered.face_region = frame.face_region
     return rendered, output
 
@@ -158,6 +158,7 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, h
     weights, priors, form = context.config.weights, context.config.priors, context.config.decouple.loss_form
     rendered, output = render_frozen(context, frame, textures)
     loss = weights.photometric * context.photometric(frame.index, rendered)
+    loss = loss + context.lit_skin_exposure(frame.index, rendered)
     if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         loss = loss + weights.binary * decouple_losses.binary_loss(rendered.light_masks, rendered.coverage,
                                                                    form=form)

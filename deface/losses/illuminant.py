@@ -7,22 +7,29 @@ among ``directions`` (the front hemisphere), where its luminance is largest.
 - colour: every light's peak chromaticity (log RGB minus its mean) matches the estimate's, weighted by the
   light's share of the brightest light's luminance (a dim light - a shadowed condition of f - matters
   less; lights with no positive luminance not at all);
-- exposure: the brightest light's peak luminance matches the estimate's (shadowed conditions of f are
-  dimmer by nature, so only the brightest is held).
-Each term is a squared log-ratio over its sigma^2. Positive parts use softplus (sharpness 20) so lights
-that start negative (the paper's initialisation) still get gradients.
+- exposure: the light falling on the lit skin of the cheeks and forehead (the rendered face over its albedo,
+  at the pixels chosen when the fit starts) matches the estimate's level times ``LIT_SKIN_SHADING``. Holding
+  a light's peak instead leaves the fit free to turn the lobe away from the face, or to let f spread a dim
+  light condition over it, and so to brighten the skin.
+Each is a squared log-ratio (the caller divides by sigma^2). Positive parts use softplus (sharpness 20) so
+lights that start negative (the paper's initialisation) still get gradients.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 
 from deface.render.sh import cosine_lobe_coefficients, sh_basis
 
 LUMINANCE = (0.2126, 0.7152, 0.0722)
+LUMINANCE_RGB = np.array(LUMINANCE)
 SHARPNESS = 20.0
+LIT_SKIN_SHADING = 0.85
+"""The light on lit cheeks and forehead as a fraction of the key light's peak: a typical cosine of about
+30 degrees between those surfaces and a portrait's key light."""
 
 
 def front_directions(count: int = 256) -> torch.Tensor:
@@ -53,16 +60,25 @@ def _positive(values: torch.Tensor) -> torch.Tensor:
     return torch.nn.functional.softplus(values * SHARPNESS) / SHARPNESS + 1e-6
 
 
-def scene_light_terms(lights: torch.Tensor, white: torch.Tensor, directions: torch.Tensor,
-                      colour_sigma: float, exposure_sigma: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """(colour, exposure) terms for kept lights [K, B*B, 3] and the estimated white level ``white`` [3]."""
+def light_colour_term(lights: torch.Tensor, white: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+    """Squared log-chromaticity distance of kept lights [K, B*B, 3] from ``white`` [3], weighted by each
+    light's share of the brightest light's peak luminance."""
     peak = peak_white(lights, directions)  # [K, 3]
     luminance = peak @ torch.tensor(LUMINANCE, dtype=peak.dtype)
     target = torch.log(white.to(peak.dtype))
     log_peak = torch.log(_positive(peak))
     chroma = (log_peak - log_peak.mean(-1, keepdim=True)) - (target - target.mean())
     share = (luminance / luminance.max().clamp_min(1e-6)).clamp(0, 1).detach()
-    colour = (share * chroma.pow(2).sum(-1)).sum() / share.sum().clamp_min(1e-6) / colour_sigma**2
-    brightest = torch.log(_positive(luminance.max()))
-    exposure = (brightest - torch.log(white.to(peak.dtype) @ torch.tensor(LUMINANCE, dtype=peak.dtype))).pow(2)
-    return colour, exposure / exposure_sigma**2
+    return (share * chroma.pow(2).sum(-1)).sum() / share.sum().clamp_min(1e-6)
+
+
+def lit_skin_level(face: torch.Tensor, diffuse: torch.Tensor, region: torch.Tensor) -> torch.Tensor:
+    """Mean luminance of the light reaching the pixels ``region`` [H, W] (bool): the rendered face [H, W, 3]
+    over its diffuse albedo [H, W, 3] (the irradiance over pi, plus a little specular)."""
+    shading = face[region] / diffuse[region].clamp_min(0.02)
+    return (shading @ torch.tensor(LUMINANCE, dtype=shading.dtype)).mean()
+
+
+def exposure_term(level: torch.Tensor, target: float) -> torch.Tensor:
+    """Squared log-ratio of a light level to its target."""
+    return (torch.log(_positive(level)) - math.log(target)).pow(2)

@@ -67,8 +67,8 @@ class SkinToneAxis:
     def linear_rgb(self, ita: torch.Tensor) -> torch.Tensor:
         """Linear RGB [..., 3] of ``ita`` [...] (degrees), piecewise linear, differentiable in ``ita``."""
         table = self.table.to(ita.dtype)
-        position = ((ita - self.min_ita) / TABLE_STEP).clamp(0, len(table) - 1.000001)
-        index = position.detach().floor().long()
+        position = ((ita - self.min_ita) / TABLE_STEP).clamp(0, len(table) - 1)
+        index = position.detach().floor().long().clamp(max=len(table) - 2)
         frac = (position - index.to(position.dtype))[..., None]
         return table[index] * (1 - frac) + table[index + 1] * frac
 

@@ -7,7 +7,7 @@ import pytest
 import torch
 from skimage.color import lab2rgb
 
-from deface.eval.skin_tone import (
+from deface.models.ita import (
     TONE_BOXES,
     in_tone_boxes,
     ita_degrees,

@@ -77,6 +77,7 @@ def lit_skin(pixels_srgb: np.ndarray) -> np.ndarray:
     """bool [N]: pixels that are neither clipped nor in shadow (see the module doc)."""
     if len(pixels_srgb) == 0:
         return np.zeros(0, dtype=bool)
+    pixels_srgb = np.clip(pixels_srgb, 0.0, 1.0)  # resampling can overshoot [0, 1] slightly
     unclipped = pixels_srgb.max(-1) < CLIPPED
     luminance = (pixels_srgb**2.2) @ np.array([0.2126, 0.7152, 0.0722])
     bright = np.percentile(luminance[unclipped], 90) if unclipped.any() else np.inf

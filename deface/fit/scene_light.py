@@ -1,0 +1,73 @@
+"""Starting stage 2 consistent with the scene's illuminant (``tone.scene_light_prior``).
+
+With light masks, a fit that starts from the paper's light values and the model's mean skin can explain a
+dark skin as a light skin under a dim light condition that f spreads over the face: the scene-light prior
+holds only the brightest light to the scene's white level W, and the tone moves a fraction of a degree per
+step. So the fit starts where the scene says it is:
+- the initial lights are scaled per channel so the brightest one's peak white response is W (their ratios,
+  signs and SH structure, which ACE and f depend on, are kept);
+- the tone starts at the ITA of the photo's lit skin (cheeks and forehead, :mod:`deface.models.ita`) divided
+  by W and by ``LIT_SKIN_SHADING``, the cosine a lit cheek or forehead typically makes with the key light
+  (about 30 degrees). Stage 2 then refines both;
+- those lit pixels are kept (``context.lit_skin``) for the scene-light prior's level term.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from deface.io.images import linear_to_srgb
+from deface.losses.illuminant import LIT_SKIN_SHADING, LUMINANCE, front_directions, peak_white
+from deface.models.ita import in_tone_boxes, ita_of_srgb, lit_skin, pixel_uvs
+
+
+def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Tensor:
+    """``lights`` [n, B*B, 3] scaled per channel so the brightest light's peak white response is ``white``."""
+    peak = peak_white(lights, front_directions())  # [n, 3]
+    brightest = peak[int((peak @ torch.tensor(LUMINANCE)).argmax())]
+    if bool((brightest <= 0).any()):
+        return lights
+    return lights * (torch.as_tensor(white, dtype=lights.dtype) / brightest)
+
+
+@torch.no_grad()
+def lit_skin_regions(context) -> list[np.ndarray]:
+    """Per frame [H, W] bool: pixels showing the cheeks and forehead that h calls skin and that are lit."""
+    regions = []
+    for frame in range(context.target.num_frames):
+        geometry = context.geometry(frame)
+        fragments = context.renderer.rasterize(geometry.mesh, geometry.camera)
+        skin = context.target.face_classifier[frame].numpy() > 0.5
+        region = (fragments.mask.numpy() > 0) & skin & in_tone_boxes(pixel_uvs(fragments, geometry.mesh))
+        region[region] = lit_skin(context.target.frames_srgb[frame][region])
+        regions.append(region)
+    return regions
+
+
+def photo_skin_ita(context, regions: list[np.ndarray], white: np.ndarray) -> float | None:
+    """The ITA of the photo's lit skin as albedo under white level ``white`` (None: too little skin seen)."""
+    colours = np.concatenate([context.target.images[f].numpy()[r] for f, r in enumerate(regions)])
+    if len(colours) < 12:
+        return None
+    albedo = np.median(colours, axis=0) / (np.asarray(white) * LIT_SKIN_SHADING)
+    return ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
+
+
+def start_from_scene(context) -> None:
+    """Scale the initial lights to the scene's white level and start the tone at the photo's (in place)."""
+    white = context.illuminant.white
+    with torch.no_grad():
+        context.scene.lights.copy_(lights_scaled_to_white(context.scene.lights, white))
+    regions = lit_skin_regions(context)
+    if sum(int(r.sum()) for r in regions) >= 12:
+        context.lit_skin = [torch.as_tensor(r) for r in regions]
+    if not context.config.tone.free_tone:
+        return
+    ita = photo_skin_ita(context, regions, white)
+    if ita is not None:
+        with torch.no_grad():
+            context.scene.tone.fill_(ita)
+        context.model.albedo.tone.clamp_(context.scene.tone)
+        context.log.info(f"skin tone starts at ITA {float(context.scene.tone.detach()):.1f} (the photo's lit "
+                         "skin under the scene's light)")
