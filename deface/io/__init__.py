@@ -1,6 +1,6 @@
 """Loading inputs: images (EXIF orientation, sRGB <-> linear), folders, video frames."""
 
-from deface.io.images import InputError, linear_to_srgb, load_image, resize_max, srgb_to_linear
+from deface.io.images import InputError, linear_to_srgb, load_image, one_line, resize_max, srgb_to_linear
 from deface.io.inputs import InputItem, list_inputs
 from deface.io.video import read_video_frames
 
@@ -10,6 +10,7 @@ __all__ = [
     "linear_to_srgb",
     "list_inputs",
     "load_image",
+    "one_line",
     "read_video_frames",
     "resize_max",
     "srgb_to_linear",

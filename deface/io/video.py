@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from deface.io.images import InputError
+from deface.io.images import InputError, one_line
 
 
 def read_video_frames(
@@ -27,7 +27,7 @@ def read_video_frames(
     try:
         reader = imageio.get_reader(str(path), format="FFMPEG")
     except Exception as err:  # imageio raises several types for unreadable files
-        raise InputError(f"{path}: cannot open video ({type(err).__name__}: {err})") from None
+        raise InputError(f"{path}: cannot open video ({one_line(err)})") from err
     frames: list[np.ndarray] = []
     try:
         fps = float(reader.get_meta_data().get("fps", 0.0) or 0.0)
@@ -39,7 +39,7 @@ def read_video_frames(
                 break
     except Exception as err:
         if not frames:
-            raise InputError(f"{path}: cannot decode video ({type(err).__name__}: {err})") from None
+            raise InputError(f"{path}: cannot decode video ({one_line(err)})") from err
     finally:
         reader.close()
     if not frames:
