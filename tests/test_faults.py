@@ -359,3 +359,49 @@ def test_large_photo_is_shrunk_while_decoding(tmp_path):
     image = load_image(path, max_side=500)
     assert image.shape == (375, 500, 3) and image.dtype == np.float32
     assert load_image(path).shape == (1500, 2000, 3)  # no limit asked: the full image
+
+
+# --- clips ----------------------------------------------------------------------------------------------
+
+
+def _clip(path: Path, frames: list[np.ndarray]) -> Path:
+    import imageio.v2 as imageio
+
+    with imageio.get_writer(str(path), fps=10, macro_block_size=1) as writer:
+        for frame in frames:
+            writer.append_data(frame)
+    return path
+
+
+@pytest.fixture(scope="module")
+def face_frame(photos) -> np.ndarray:
+    return np.asarray(Image.open(photos / "000031.jpg").convert("RGB").resize((160, 160)))
+
+
+def test_clip_whose_middle_frames_have_no_face_keeps_the_others(tmp_path, face_frame):
+    from deface.fit.pipeline import detect
+    from deface.io.inputs import InputItem
+
+    blank = np.full_like(face_frame, 128)
+    clip = _clip(tmp_path / "gap.mp4", [face_frame, blank, blank, face_frame])
+    config = override(presets.get("fast"), max_frames=4, resolution=64)
+    frames, indices = fit_cli.load_frames(InputItem(clip, "video"), config)
+    work, landmarks, _scale, kept = detect(frames, config, str(clip), video=True)
+    assert indices == [0, 1, 2, 3] and kept == [0, 3] and len(work) == len(landmarks) == 2
+
+
+def test_one_frame_clip_is_one_frame(tmp_path, face_frame):
+    from deface.fit.pipeline import detect
+    from deface.io.inputs import InputItem
+
+    clip = _clip(tmp_path / "single.mp4", [face_frame])
+    config = override(presets.get("fast"), resolution=64)
+    frames, indices = fit_cli.load_frames(InputItem(clip, "video"), config)
+    assert indices == [0] and len(frames) == 1
+    assert detect(frames, config, str(clip), video=True)[3] == [0]
+
+
+def test_clip_without_any_face_fails_in_one_line(tmp_path, face_frame):
+    clip = _clip(tmp_path / "empty.mp4", [np.full_like(face_frame, 128)] * 2)
+    code, lines = _fit(clip, "-o", tmp_path / "out")
+    assert code == 1 and _errors(lines) == [f"error: {clip}: no face found in any of 2 frame(s)"]

@@ -73,6 +73,7 @@ def staged_directory(final: Path) -> Iterator[Path]:
     final.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=STAGING_SUFFIX, dir=final.parent))
     try:
+        staging.chmod(0o777 & ~_umask())  # mkdtemp makes it private (0700); outputs get the usual mode
         yield staging
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
@@ -85,6 +86,12 @@ def staged_directory(final: Path) -> Iterator[Path]:
         shutil.rmtree(previous, ignore_errors=True)
     else:
         staging.rename(final)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _previous(final: Path) -> Path:
