@@ -405,3 +405,19 @@ def test_clip_without_any_face_fails_in_one_line(tmp_path, face_frame):
     clip = _clip(tmp_path / "empty.mp4", [np.full_like(face_frame, 128)] * 2)
     code, lines = _fit(clip, "-o", tmp_path / "out")
     assert code == 1 and _errors(lines) == [f"error: {clip}: no face found in any of 2 frame(s)"]
+
+
+def test_demo_with_an_unknown_preset_is_a_usage_error(tmp_path, shared):
+    result = CliRunner().invoke(app, ["demo", "-o", str(tmp_path), "--preset", "nope"])
+    assert result.exit_code == 2 and result.output.splitlines() == [
+        "error: unknown preset 'nope' (choose from: default, paper, deface, code-images, code-video, "
+        "code-portrait, nextface, nextface-star, fast)"]
+
+
+def test_disk_full_at_the_lock_is_one_line_not_a_bug_report(photo, tmp_path, fake_fit, monkeypatch):
+    def full(*_args, **_kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), "lock")
+
+    monkeypatch.setattr("deface.export.files._lock", full)
+    code, lines = _fit(photo, "-o", tmp_path / "out")
+    assert code == 1 and _errors(lines) == ["error: [Errno 28] No space left on device: 'lock'"]

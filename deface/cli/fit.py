@@ -30,7 +30,8 @@ from deface.landmarks.detect import NoFaceError
 from deface.models.registry import require_face_model
 from deface.paths import ModelFileError
 
-EXPECTED_ERRORS = (InputError, NoFaceError, ModelFileError, OutputError, NonFiniteError, ValueError)
+# Failures of one input that are explained by their message (OSError: disk, permissions, missing files).
+EXPECTED_ERRORS = (InputError, NoFaceError, ModelFileError, OutputError, NonFiniteError, ValueError, OSError)
 EXIT_FAILED, EXIT_USAGE = 1, 2
 
 
@@ -95,7 +96,7 @@ def fit_command(
         config = override(_config(preset, seed, lights, bands, light_masks, face_region, priors, resolution,
                                   iterations, max_frames, frame_stride, face_index, threads), model=model)
         items = list_inputs(inputs)
-    except (InputError, ValueError) as error:
+    except (InputError, ValueError, OSError) as error:
         report_error(error)
         raise typer.Exit(EXIT_USAGE) from None
     try:
