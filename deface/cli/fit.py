@@ -25,7 +25,7 @@ from deface.fit.log import FitLog, console
 from deface.fit.pipeline import fit
 from deface.io.images import LOAD_MAX_SIDE, InputError, load_image, one_line
 from deface.io.inputs import InputItem, list_inputs
-from deface.io.video import read_video_frames
+from deface.io.video import read_spread_frames
 from deface.landmarks.detect import NoFaceError
 from deface.models.registry import require_face_model
 from deface.paths import ModelFileError
@@ -187,10 +187,7 @@ def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], l
     """sRGB frames of an input and their indices in the source (a photo is frame 0)."""
     if item.kind == "image":
         return [load_image(item.path, max_side=LOAD_MAX_SIDE)], [0]
-    frames, _fps = read_video_frames(item.path, stride=config.frame_stride)
-    count = min(config.max_frames, len(frames))
-    chosen = np.linspace(0, len(frames) - 1, count).round().astype(int).tolist()
-    return [frames[i] for i in chosen], [i * config.frame_stride for i in chosen]
+    return read_spread_frames(item.path, config.max_frames, config.frame_stride, max_side=LOAD_MAX_SIDE)
 
 
 def _fit_one(item: InputItem, output: Path, config: FitConfig, models, overwrite: bool, quiet: bool,

@@ -2,7 +2,7 @@
 
 from deface.io.images import InputError, linear_to_srgb, load_image, one_line, resize_max, srgb_to_linear
 from deface.io.inputs import InputItem, list_inputs
-from deface.io.video import read_video_frames
+from deface.io.video import read_spread_frames, read_video_frames
 
 __all__ = [
     "InputError",
@@ -11,6 +11,7 @@ __all__ = [
     "list_inputs",
     "load_image",
     "one_line",
+    "read_spread_frames",
     "read_video_frames",
     "resize_max",
     "srgb_to_linear",
