@@ -249,6 +249,22 @@ def test_signal_ends_the_run_in_one_line_and_a_rerun_resumes(photo, tmp_path, mo
     assert rerun.wait(30) == 0 and sorted(os.listdir(out)) == ["face", "other"]
 
 
+@pytest.mark.slow
+def test_sigint_during_a_real_fit(photos, tmp_path):
+    """The real pipeline (no stand-in) stops within seconds of Ctrl-C in stage 2, leaving no output."""
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "deface.cli.main", "fit", str(photos / "000031.jpg"), "-o", str(out),
+               "--preset", "fast", "--iterations", "20,400,3", "--resolution", "64"]
+    process = subprocess.Popen(command, cwd=REPO, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                               env={**os.environ, "PYTHONPATH": str(REPO)})
+    _wait_for(process, "stage 2    1/400")
+    process.send_signal(signal.SIGINT)
+    assert process.wait(60) == 130
+    rest = process.stderr.read()
+    assert "Traceback" not in rest and rest.strip().splitlines()[-1].startswith("interrupted (SIGINT) during ")
+    assert not out.exists() or os.listdir(out) == []
+
+
 def test_kill_9_mid_write_leaves_staging_that_the_rerun_removes(photo, tmp_path):
     out = tmp_path / "out"
     process = _driver("write", 60, photo, "-o", out)
