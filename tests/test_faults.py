@@ -437,3 +437,18 @@ def test_disk_full_at_the_lock_is_one_line_not_a_bug_report(photo, tmp_path, fak
     monkeypatch.setattr("deface.export.files._lock", full)
     code, lines = _fit(photo, "-o", tmp_path / "out")
     assert code == 1 and _errors(lines) == ["error: [Errno 28] No space left on device: 'lock'"]
+
+
+def test_multi_line_and_unexpected_errors_are_one_line_with_details_under_verbose(photo, tmp_path, monkeypatch):
+    def ffmpeg_like(*_args, **_kwargs):
+        raise ValueError("cannot decode\n=== stderr ===\nframe 3: invalid NAL unit\n")
+
+    monkeypatch.setattr(fit_cli, "fit", ffmpeg_like)
+    code, lines = _fit(photo, "-o", tmp_path / "out")
+    assert code == 1 and _errors(lines) == ["error: cannot decode (more with --verbose)"]
+    verbose = CliRunner().invoke(app, ["fit", str(photo), "-o", str(tmp_path / "out"), "--verbose"])
+    assert "Traceback" in verbose.output and "invalid NAL unit" in verbose.output
+    monkeypatch.setattr(fit_cli, "fit", lambda *a, **k: {}["bug"])
+    code, lines = _fit(photo, "-o", tmp_path / "out")
+    assert code == 1 and _errors(lines) == ["error: unexpected KeyError: 'bug' (a bug: please report it with the "
+                                            "output of --verbose)"]

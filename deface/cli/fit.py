@@ -109,21 +109,22 @@ def fit_command(
         raise typer.Exit(EXIT_FAILED)
 
 
-def report_error(error: BaseException | str, verbose: bool = False) -> None:
+def report_error(error: BaseException, verbose: bool = False) -> None:
     """One line on stderr (markup-safe); with ``verbose`` the traceback and chained causes first."""
-    if verbose and isinstance(error, BaseException):
+    if verbose:
         console.print("".join(traceback.format_exception(error)).rstrip(), markup=False)
-    text = " ".join(str(error).split()) if isinstance(error, str) else _message(error)
-    console.print(f"[red]error:[/red] {escape(text)}")
+    console.print(f"[red]error:[/red] {escape(_message(error))}")
 
 
 def _message(error: BaseException) -> str:
-    if isinstance(error, EXPECTED_ERRORS) and str(error):
-        lines = [line.strip() for line in str(error).splitlines() if line.strip()]
-        return lines[0] if len(lines) == 1 else f"{lines[0]} (more with --verbose)"
     if isinstance(error, MemoryError):
         return "out of memory; try a smaller --resolution or --max-frames"
-    return f"unexpected {one_line(error)} (a bug: please report it with the output of --verbose)"
+    if not isinstance(error, EXPECTED_ERRORS):
+        return f"unexpected {one_line(error)} (a bug: please report it with the output of --verbose)"
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    if not lines:
+        return one_line(error)
+    return lines[0] if len(lines) == 1 else f"{lines[0]} (more with --verbose)"
 
 
 def run(items: list[InputItem], output: Path, config: FitConfig, models=None, overwrite: bool = False,
