@@ -1,9 +1,10 @@
 """Where model files and shared data are found.
 
-Model files (face models, optional network weights) are looked up, in order, in:
-1. an explicit directory (the CLI's ``--models DIR``),
-2. the ``DEFACE_MODELS`` environment variable,
-3. the user's cache directory (``$XDG_CACHE_HOME/deface/models``, default ``~/.cache/deface/models``).
+Model files (face models, optional network weights) are looked up in an explicit directory (the CLI's
+``--models DIR``) and there only: a user who names a folder gets that folder or a clear error, never a
+silent fallback. Without one they are looked up, in order, in:
+1. the ``DEFACE_MODELS`` environment variable,
+2. the user's cache directory (``$XDG_CACHE_HOME/deface/models``, default ``~/.cache/deface/models``).
 The repository never contains model files; the demo and CI point ``DEFACE_MODELS`` at ``../shared/models``.
 """
 
@@ -25,10 +26,10 @@ def user_cache_dir() -> Path:
 
 
 def models_dir_candidates(explicit: str | os.PathLike | None = None) -> list[Path]:
-    """Directories searched for model files, highest priority first."""
-    candidates = []
+    """Directories searched for model files, highest priority first (only ``explicit`` when given)."""
     if explicit:
-        candidates.append(Path(explicit).expanduser())
+        return [Path(explicit).expanduser()]
+    candidates = []
     env = os.environ.get("DEFACE_MODELS")
     if env:
         candidates.append(Path(env).expanduser())

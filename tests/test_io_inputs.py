@@ -11,6 +11,7 @@ from deface.io import (
     linear_to_srgb,
     list_inputs,
     load_image,
+    read_spread_frames,
     read_video_frames,
     resize_max,
     srgb_to_linear,
@@ -98,3 +99,15 @@ def test_video_frames_with_stride(shared):
         np.testing.assert_array_equal(frame, every[3 * k])
     with pytest.raises(ValueError):
         read_video_frames(path, stride=0)
+
+
+def test_spread_frames_match_the_full_decode(shared):
+    path = shared / "data" / "videos" / "d18.mp4"
+    every, _ = read_video_frames(path, stride=4)
+    frames, indices = read_spread_frames(path, 5, stride=4, max_side=240)
+    chosen = np.linspace(0, len(every) - 1, 5).round().astype(int)
+    assert indices == (chosen * 4).tolist() and indices[0] == 0
+    assert frames[0].shape == (240, 240, 3)  # shrunk from 480 while decoding
+    assert np.abs(frames[2] - resize_max(every[chosen[2]], 240)[0]).mean() < 0.02
+    few, indices = read_spread_frames(path, 500, max_side=32)
+    assert len(few) == len(indices) == 216 and indices == list(range(216))  # never more than the clip has

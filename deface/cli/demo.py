@@ -32,7 +32,12 @@ def demo_command(
     from deface.fit import presets
     from deface.io.inputs import list_inputs
 
+    try:
+        config = presets.get(preset)
+    except ValueError as error:
+        console.print(f"[red]error:[/red] {error}")
+        raise typer.Exit(2) from None
     photo = shared / DEMO_PHOTO
     console.print(f"demo: fitting {photo} with preset '{preset}'")
-    if run(list_inputs([photo]), output, presets.get(preset), overwrite=True):
+    if run(list_inputs([photo]), output, config, overwrite=True):
         raise typer.Exit(1)

@@ -28,6 +28,7 @@ from typing import Literal
 import numpy as np
 import torch
 
+from deface.fit.guard import StepGuard
 from deface.landmarks.correspondence import Correspondence, landmark_basis
 from deface.landmarks.detect import Landmarks
 from deface.losses.landmarks import blendshape_prior, identity_prior, landmark_loss, pca_expression_prior
@@ -253,9 +254,11 @@ class _Problem:
         history = []
         rigid_steps, total = self.config.rigid_iterations, self.config.iterations
         optimiser = self._optimiser(rigid=True)
+        guard = StepGuard(optimiser, "stage 1")  # NaN/Inf rollback (deface/fit/guard.py)
         for step in range(total):
             if step == rigid_steps:
                 optimiser = self._optimiser(rigid=False)
+                guard = StepGuard(optimiser, "stage 1")
             # Cosine decay to 10% within each phase: Adam at a constant step oscillates around the optimum.
             start, length = (0, rigid_steps) if step < rigid_steps else (rigid_steps, total - rigid_steps)
             factor = 0.1 + 0.45 * (1 + math.cos(math.pi * (step - start) / max(length, 1)))
@@ -269,6 +272,7 @@ class _Problem:
             if self.blendshapes:
                 with torch.no_grad():
                     self.expression.clamp_(0.0, 1.0)
+            guard.check(loss)
             history.append(float(loss.detach()))
         return np.asarray(history, np.float32)
 

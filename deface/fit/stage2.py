@@ -14,6 +14,7 @@ import torch
 from deface.decouple.ace import light_areas
 from deface.fit.config import FitConfig
 from deface.fit.decoupling import Decoupling
+from deface.fit.guard import StepGuard
 from deface.fit.scene import SceneParameters, frame_geometry
 from deface.fit.target import FitTarget
 from deface.losses import decouple as decouple_losses
@@ -120,6 +121,7 @@ def run_stage2(context: StageContext) -> list[float]:
     """Run stage 2 in place on ``context.scene`` / ``context.decoupling``; returns the loss per iteration."""
     config, scene, decoupling = context.config, context.scene, context.decoupling
     optimiser = torch.optim.Adam(_parameter_groups(context))
+    guard = StepGuard(optimiser, "stage 2", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
     history = []
     ace_at = min(config.decouple.ace_iteration, config.iterations.stage2 - 1)
     for step in range(config.iterations.stage2):
@@ -133,6 +135,7 @@ def run_stage2(context: StageContext) -> list[float]:
         scene.clamp_(context.model.expression_prior)
         if config.tone.free_tone:
             context.model.albedo.tone.clamp_(scene.tone)
+        guard.check(loss)
         value = float(loss.detach())
         history.append(value)
         context.log.step("stage 2", step, config.iterations.stage2, value)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import torch
 
+from deface.fit.guard import StepGuard
 from deface.fit.stage2 import FrameRender, StageContext
 from deface.losses import decouple as decouple_losses
 from deface.losses.texture import texture_regularisers
@@ -67,6 +68,7 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     frozen = freeze_frames(context, initial)
     parameters = TextureParameters(initial)
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
+    guard = StepGuard(optimiser, "stage 3", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
     loss_of = objective(context, frozen, initial, human_prior)
     history = []
     for step in range(context.config.iterations.stage3):
@@ -74,6 +76,7 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
         loss = loss_of(parameters.textures())
         loss.backward()
         optimiser.step()
+        guard.check(loss)
         value = float(loss.detach())
         history.append(value)
         context.log.step("stage 3", step, context.config.iterations.stage3, value)

@@ -16,27 +16,63 @@ from PIL import Image, ImageOps, UnidentifiedImageError
 GAMMA = 2.2  # NextFace's display gamma
 
 
+# Larger photos are shrunk while they are decoded (JPEG: at a fraction of the full size) so that an
+# 8000 x 6000 photo never exists as a float image; the fit works at --resolution <= 2048 anyway.
+LOAD_MAX_SIDE = 2048
+# Pillow's decompression-bomb guard would allow ~179 MP; a photo above this is refused before decoding.
+MAX_PIXELS = 120_000_000
+
+
 class InputError(ValueError):
     """An input file cannot be used (missing, unreadable, corrupt, wrong kind); one line, names the file."""
 
 
-def load_image(path: str | os.PathLike) -> np.ndarray:
+def one_line(error: BaseException) -> str:
+    """``Type: first line of the message`` (libraries such as ffmpeg give pages); at most 200 characters."""
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    text = f"{type(error).__name__}: {lines[0]}" if lines else type(error).__name__
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def load_image(path: str | os.PathLike, max_side: int | None = None) -> np.ndarray:
     """Read an image file -> [H, W, 3] float32 sRGB in [0, 1], EXIF orientation applied.
 
     Grey images are repeated to 3 channels; an alpha channel is dropped (faces are opaque; transparent
-    pixels keep their stored colour). 16-bit greys are scaled by 65535.
+    pixels keep their stored colour). 16-bit greys are scaled by 65535. With ``max_side`` a larger image
+    is shrunk while it is decoded (keeping its aspect), before the float image is made.
     """
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     try:
         with Image.open(path) as img:
+            _check_pixels(path, img)
+            if max_side:
+                img.draft("RGB", (max_side, max_side))  # JPEG: decode at 1/2, 1/4 or 1/8 scale
             img = ImageOps.exif_transpose(img)
             img.load()
-            array = _to_rgb_array(img)
-    except (UnidentifiedImageError, OSError, SyntaxError) as err:
-        raise InputError(f"{path}: cannot read image ({type(err).__name__}: {err})") from None
+            array = _to_rgb_array(_shrink(img, max_side))
+    except InputError:
+        raise
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError, Image.DecompressionBombError) as err:
+        raise InputError(f"{path}: cannot read image ({one_line(err)})") from err
     return array
+
+
+def _check_pixels(path: Path, img: Image.Image) -> None:
+    width, height = img.size
+    if width < 1 or height < 1 or width * height > MAX_PIXELS:
+        raise InputError(f"{path}: {width} x {height} pixels is outside 1 .. {MAX_PIXELS // 1_000_000} MP")
+
+
+def _shrink(img: Image.Image, max_side: int | None) -> Image.Image:
+    if not max_side or max(img.size) <= max_side:
+        return img
+    if img.mode not in ("I;16", "I;16B", "I;16L", "I", "F"):
+        img = img.convert("RGB")
+    img = img.copy()
+    img.thumbnail((max_side, max_side), Image.LANCZOS)
+    return img
 
 
 def _to_rgb_array(img: Image.Image) -> np.ndarray:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from deface.models.base import FaceModel
-from deface.paths import find_model_file, models_dir_candidates
+from deface.paths import ModelFileError, find_model_file, models_dir_candidates
 
 
 @dataclass(frozen=True)
@@ -194,6 +194,15 @@ def status(entry: ModelFile, models_dir: str | os.PathLike | None = None, verify
         except (OSError, ValueError):
             pass
     return FileStatus(entry, path, "mismatch", target)
+
+
+def require_face_model(name: str, models_dir: str | os.PathLike | None = None) -> None:
+    """Raise :class:`ModelFileError` (one line: what, where to get it, where to put it) when a file of face
+    model ``name`` is missing; with ``models_dir`` only that folder counts."""
+    for entry in select([name]):
+        problem = status(entry, models_dir).problem
+        if problem:
+            raise ModelFileError(problem)
 
 
 def load_face_model(name: str, models_dir: str | os.PathLike | None = None) -> FaceModel:
