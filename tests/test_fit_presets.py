@@ -26,7 +26,15 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
     paper, deface = _flatten(to_dict(presets.get("paper"))), _flatten(to_dict(presets.get("deface")))
     changed = {key: deface[key] for key in paper if paper[key] != deface[key]}
     assert changed == {"preset": "deface", "decouple.face_region": False, "decouple.epsilon": 0.09,
-                       "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES}
+                       "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES,
+                       "tone.free_tone": True, "tone.scene_light_prior": True}  # docs/skin-tone.md
+
+
+def test_baselines_keep_the_model_mean_skin_and_free_lights():
+    """NextFace's and the paper's numbers must not move with the skin-tone work."""
+    for name in ("paper", "nextface", "nextface-star", "code-images", "code-video", "code-portrait"):
+        tone = presets.get(name).tone
+        assert not tone.free_tone and not tone.scene_light_prior, name
 
 
 def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():

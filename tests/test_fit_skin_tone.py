@@ -10,7 +10,6 @@ import pytest
 import torch
 from skimage.color import lab2rgb
 
-from deface.models.ita import texture_ita
 from deface.eval.synthetic import directional_sh, true_landmarks
 from deface.fit import presets
 from deface.fit.config import override
@@ -21,6 +20,7 @@ from deface.fit.target import FitTarget
 from deface.io.images import linear_to_srgb
 from deface.losses.illuminant import front_directions, peak_white
 from deface.models import load_face_model
+from deface.models.ita import texture_ita
 from deface.priors.illuminant import planckian_rgb
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures

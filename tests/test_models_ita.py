@@ -7,6 +7,7 @@ import pytest
 import torch
 from skimage.color import lab2rgb
 
+from deface.eval.tone_benchmark import TonePhoto, read_manifest, summary
 from deface.models.ita import (
     TONE_BOXES,
     in_tone_boxes,
@@ -18,7 +19,6 @@ from deface.models.ita import (
     texture_ita,
     texture_tone_mask,
 )
-from deface.eval.tone_benchmark import TonePhoto, read_manifest, summary
 
 
 @pytest.mark.parametrize("lab, expected", [((50.0, 10.0, 20.0), 0.0), ((60.0, 5.0, 10.0), 45.0),

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from deface.models.ita import ita_of_srgb
 from deface.models.albedo_prior import JENSEN2001_SKIN1_RD, JENSEN2001_SKIN2_RD, AlbedoPriorConfig
+from deface.models.ita import ita_of_srgb
 from deface.models.skin_tone import SkinToneAxis
 
 AXIS = SkinToneAxis.through(AlbedoPriorConfig().skin_rgb)

@@ -155,6 +155,7 @@ def skin_tone_command(
         update_benchmarks_md(report, section, key=f"skin-tone-{folder.resolve().name}")
     for variant, recs in records.items():
         s = summary(photos, recs)
-        console.print(f"{variant}: MAE {s['mae']:.1f}, groups {', '.join(f'{g} {v:.1f}' for g, v in s['group_mae'].items())},"
-                      f" bias {s['bias']:.2f}, Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}")
+        groups = ", ".join(f"{g} {v:.1f}" for g, v in s["group_mae"].items())
+        console.print(f"{variant}: MAE {s['mae']:.1f}, groups {groups}, bias {s['bias']:.2f}, "
+                      f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}")
     console.print(f"wrote {output / 'report.md'} and {sheet}")

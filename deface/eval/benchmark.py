@@ -94,7 +94,8 @@ def _run_pair(task: tuple) -> tuple[str, str, float]:
         return variant_name, pair.name, scores["seconds_per_fit"]
     outcome = evaluate_pair(pair, config, folder, models_dir)
     cached.write_text(json.dumps({"source": outcome.scores.source, "target": outcome.scores.target,
-                                  "seconds_per_fit": outcome.seconds_per_fit, "config": config_json(config)}, indent=1))
+                                  "seconds_per_fit": outcome.seconds_per_fit, "albedo_ita": outcome.albedo_ita,
+                                  "config": config_json(config)}, indent=1))
     return variant_name, pair.name, outcome.seconds_per_fit
 
 
@@ -136,13 +137,16 @@ def map_in_processes(function, tasks: list, jobs: int):
 
 
 def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
-    scores, seconds = [], []
+    scores, seconds, ita_gaps = [], [], []
     for pair in pairs:
         data = json.loads((out_dir / name / pair.name / "scores.json").read_text())
         scores.append(PairScores(pair.name, data["source"], data["target"]))
         seconds.append(data["seconds_per_fit"])
+        if "albedo_ita" in data:
+            ita_gaps.append(abs(data["albedo_ita"]["source"] - data["albedo_ita"]["target"]))
     write_metrics_json(out_dir / name / "metrics.json", name, scores)
-    (out_dir / name / "timing.json").write_text(json.dumps({"seconds_per_fit": seconds}))
+    gap = sum(ita_gaps) / len(ita_gaps) if len(ita_gaps) == len(pairs) else None
+    (out_dir / name / "timing.json").write_text(json.dumps({"seconds_per_fit": seconds, "albedo_ita_gap": gap}))
 
 
 def _fitted_now(out_dir: Path, name: str, schedule: str, pairs: list[Pair]) -> bool:
@@ -154,17 +158,19 @@ def _fitted_now(out_dir: Path, name: str, schedule: str, pairs: list[Pair]) -> b
 def _row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair]) -> str:
     path = out_dir / name / "metrics.json"
     if not path.exists():
-        return f"| {label} | not run | | | | | | | |"
+        return f"| {label} | not run | | | | | | | | |"
     if not _fitted_now(out_dir, name, schedule, pairs):
-        return f"| {label} | not run with the current configuration | | | | | | | |"
+        return f"| {label} | not run with the current configuration | | | | | | | | |"
     mean = json.loads(path.read_text())["mean"]
     target, source = mean["target"], mean["source"]
-    seconds = json.loads((out_dir / name / "timing.json").read_text())["seconds_per_fit"]
+    timing = json.loads((out_dir / name / "timing.json").read_text())
+    seconds, gap = timing["seconds_per_fit"], timing.get("albedo_ita_gap")
     cells = [target["face"]["psnr"], target["face"]["ssim"], target["face"]["lpips"], target["full"]["psnr"],
              target["full"]["ssim"], target["full"]["lpips"], source["face"]["psnr"]]
     text = [f"{c:.2f}" if i not in (1, 4) else f"{c:.3f}" for i, c in enumerate(cells)]
     identity = target.get("identity")  # absent without dlib, or when a cached pair predates the column
     text.append(f"{identity['distance']:.3f}" if identity else "-")
+    text.append(f"{gap:.1f}" if gap is not None else "-")
     return f"| {label} | " + " | ".join(text) + f" | {sum(seconds) / len(seconds):.0f} |"
 
 
@@ -185,11 +191,13 @@ def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str,
         " the face region h and over the full composite; source reconstruction PSNR over the face region;"
         " LPIPS x100; ID dist = dlib face-descriptor distance of the target synthesis (full composite) to the"
         " target photo, lower is better, < 0.6 = same person (docs/evaluation.md; '-' where dlib was not"
-        " installed or some pair's cached scores predate it); seconds = mean wall time per fit.",
+        " installed or some pair's cached scores predate it); ITA gap = mean |ITA(source albedo) - ITA(target"
+        " albedo)|, degrees: the same person's skin tone from the shadowed and the clean photo (docs/skin-tone.md);"
+        " seconds = mean wall time per fit.",
         "",
     ]
     header = ("| | PSNR face | SSIM face | LPIPS face | PSNR full | SSIM full | LPIPS full | src PSNR face | ID dist"
-              " | s/fit |\n|---|---|---|---|---|---|---|---|---|---|")
+              " | ITA gap | s/fit |\n|---|---|---|---|---|---|---|---|---|---|---|")
     for title, rows in TABLES:
         table = [_row(out_dir, label, name, schedule, pairs) for label, name in rows]
         lines += [f"### {title}", "", header, *table, ""]

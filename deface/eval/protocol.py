@@ -24,6 +24,7 @@ from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
 from deface.fit.pipeline import FitResult, fit
 from deface.io.images import linear_to_srgb, load_image
+from deface.models.ita import texture_ita
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,7 @@ class PairOutcome:
     scores: PairScores
     row: ReportRow
     seconds_per_fit: float
+    albedo_ita: dict  # {"source": ITA, "target": ITA} of the two fits' diffuse textures (same person)
 
 
 def fit_side(paths: list[Path], config: FitConfig, models_dir, name: str, quiet: bool) -> FitResult:
@@ -78,7 +80,12 @@ def evaluate_pair(pair: Pair, config: FitConfig, folder: Path, models_dir=None, 
     images = _save_images(folder, source, target, source_outputs[0], swap_outputs[0])
     scores = PairScores(pair.name, source_scores, swap_scores)
     row = ReportRow(pair.name, images, {"source": source_scores, "target": swap_scores})
-    return PairOutcome(scores, row, seconds)
+    return PairOutcome(scores, row, seconds, {"source": _albedo_ita(source), "target": _albedo_ita(target)})
+
+
+def _albedo_ita(result: FitResult) -> float:
+    """The skin tone of a fit's diffuse texture (deface/models/ita.py)."""
+    return texture_ita(linear_to_srgb(_np(result.textures.diffuse).clip(0, 1)))
 
 
 def _save_images(folder: Path, source: FitResult, target: FitResult, source_out, swap_out) -> dict[str, Path]:

@@ -81,12 +81,12 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
     """Fit ``path``, write the fit and a neutral-light render into ``result_dir``, return the tone record."""
     import torch
 
-    from deface.models.ita import photo_tone, pixel_uvs, texture_ita
     from deface.export.files import save_png
     from deface.export.outputs import write_fit
     from deface.fit.log import FitLog
     from deface.fit.pipeline import fit
     from deface.io.images import linear_to_srgb, load_image
+    from deface.models.ita import photo_tone, pixel_uvs, texture_ita
     from deface.render.sh import white_light
 
     started = time.perf_counter()

@@ -13,8 +13,8 @@ import torch
 from deface.fit.config import FitConfig
 from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
-from deface.fit.scene_light import start_from_scene
 from deface.fit.scene import SceneParameters, initial_lights, topology_tensors
+from deface.fit.scene_light import start_from_scene
 from deface.fit.stage1 import Stage1Config, fit_landmarks
 from deface.fit.stage2 import FrameRender, StageContext, run_stage2
 from deface.fit.stage3 import FrozenFrame, relight_frozen, render_frozen, run_stage3

@@ -6,10 +6,11 @@ holds only the brightest light to the scene's white level W, and the tone moves 
 step. So the fit starts where the scene says it is:
 - the initial lights are scaled per channel so the brightest one's peak white response is W (their ratios,
   signs and SH structure, which ACE and f depend on, are kept);
-- the tone starts at the ITA of the photo's lit skin (cheeks and forehead, :mod:`deface.models.ita`) divided
-  by W and by ``LIT_SKIN_SHADING``, the cosine a lit cheek or forehead typically makes with the key light
-  (about 30 degrees). Stage 2 then refines both;
-- those lit pixels are kept (``context.lit_skin``) for the scene-light prior's level term.
+- the tone starts at the ITA of the photo's most lit skin (the brightest tenth of the unclipped cheek and
+  forehead pixels, :mod:`deface.models.ita`: the points facing the key light, clear of cast shadows that
+  cover less than nine tenths of them) divided by W. Stage 2 then refines both;
+- the skin pixels of the cheeks and forehead are kept (``context.lit_skin``) for the scene-light prior's
+  level term.
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from deface.io.images import linear_to_srgb
-from deface.losses.illuminant import LIT_SKIN_SHADING, LUMINANCE, front_directions, peak_white
-from deface.models.ita import in_tone_boxes, ita_of_srgb, lit_skin, pixel_uvs
+from deface.io.images import linear_to_srgb, srgb_to_linear
+from deface.losses.illuminant import KEY_QUANTILE, LUMINANCE, front_directions, peak_white
+from deface.models.ita import CLIPPED, in_tone_boxes, ita_of_srgb, pixel_uvs
 
 
 def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Tensor:
@@ -33,24 +34,26 @@ def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Ten
 
 @torch.no_grad()
 def lit_skin_regions(context) -> list[np.ndarray]:
-    """Per frame [H, W] bool: pixels showing the cheeks and forehead that h calls skin and that are lit."""
+    """Per frame [H, W] bool: pixels showing the cheeks and forehead that h calls skin."""
     regions = []
     for frame in range(context.target.num_frames):
         geometry = context.geometry(frame)
         fragments = context.renderer.rasterize(geometry.mesh, geometry.camera)
         skin = context.target.face_classifier[frame].numpy() > 0.5
         region = (fragments.mask.numpy() > 0) & skin & in_tone_boxes(pixel_uvs(fragments, geometry.mesh))
-        region[region] = lit_skin(context.target.frames_srgb[frame][region])
         regions.append(region)
     return regions
 
 
 def photo_skin_ita(context, regions: list[np.ndarray], white: np.ndarray) -> float | None:
-    """The ITA of the photo's lit skin as albedo under white level ``white`` (None: too little skin seen)."""
-    colours = np.concatenate([context.target.images[f].numpy()[r] for f, r in enumerate(regions)])
-    if len(colours) < 12:
+    """The ITA of the photo's most lit skin as albedo under white level ``white`` (None: too little skin)."""
+    srgb = np.concatenate([context.target.frames_srgb[f][r] for f, r in enumerate(regions)])
+    srgb = srgb[srgb.max(-1) < CLIPPED]
+    if len(srgb) < 12:
         return None
-    albedo = np.median(colours, axis=0) / (np.asarray(white) * LIT_SKIN_SHADING)
+    luminance = srgb_to_linear(srgb) @ np.asarray(LUMINANCE)
+    brightest = srgb[luminance >= np.percentile(luminance, 100 * KEY_QUANTILE)]
+    albedo = np.median(srgb_to_linear(brightest), axis=0) / np.asarray(white)
     return ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
 
 

@@ -19,12 +19,11 @@ from deface.fit.scene import SceneParameters, frame_geometry
 from deface.fit.target import FitTarget
 from deface.losses import decouple as decouple_losses
 from deface.losses.illuminant import (
-    LIT_SKIN_SHADING,
     LUMINANCE_RGB,
     exposure_term,
     front_directions,
+    key_light_level,
     light_colour_term,
-    lit_skin_level,
 )
 from deface.losses.photometric import photometric_loss
 from deface.priors.illuminant import IlluminantEstimate
@@ -57,7 +56,7 @@ class StageContext:
         self.renderer = Renderer(target.render_config(config))
         self.shadow_caches = [ShadowTransferCache(self.renderer) for _ in range(target.num_frames)]
         self.illuminant: IlluminantEstimate | None = None  # the scene's light, set after stage 1
-        self.lit_skin: list[torch.Tensor] = []  # per frame [H, W] bool: lit cheeks and forehead (scene_light.py)
+        self.lit_skin: list[torch.Tensor] = []  # per frame [H, W] bool: skin of the cheeks and forehead
         self._directions = front_directions()
 
     def geometry(self, frame: int):
@@ -80,12 +79,13 @@ class StageContext:
         return tone.weight * colour / tone.colour_sigma**2
 
     def lit_skin_exposure(self, frame: int, rendered: FrameRender) -> torch.Tensor:
-        """The scene-light level term of one frame: the light falling on its lit skin (0 when off)."""
+        """The scene-light level term of one frame: the brightest light's level on the cheeks and forehead
+        (0 when off)."""
         tone, region = self.config.tone, self.lit_skin[frame] if self.lit_skin else None
         if not tone.scene_light_prior or self.illuminant is None or region is None or rendered.diffuse is None:
             return torch.zeros(())
-        level = lit_skin_level(rendered.face, rendered.diffuse, region)
-        target = float(self.illuminant.white @ LUMINANCE_RGB) * LIT_SKIN_SHADING
+        level = key_light_level(rendered.light_images, rendered.diffuse, region)
+        target = float(self.illuminant.white @ LUMINANCE_RGB)
         return tone.weight * exposure_term(level, target) / tone.exposure_sigma**2
 
     def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool, geometry=None) -> FrameRender:

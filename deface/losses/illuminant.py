@@ -7,10 +7,10 @@ among ``directions`` (the front hemisphere), where its luminance is largest.
 - colour: every light's peak chromaticity (log RGB minus its mean) matches the estimate's, weighted by the
   light's share of the brightest light's luminance (a dim light - a shadowed condition of f - matters
   less; lights with no positive luminance not at all);
-- exposure: the light falling on the lit skin of the cheeks and forehead (the rendered face over its albedo,
-  at the pixels chosen when the fit starts) matches the estimate's level times ``LIT_SKIN_SHADING``. Holding
-  a light's peak instead leaves the fit free to turn the lobe away from the face, or to let f spread a dim
-  light condition over it, and so to brighten the skin.
+- exposure: the brightest light's level on the face (:func:`key_light_level`: the 90th percentile over the
+  skin of the cheeks and forehead of its own render over the albedo) matches the estimate's level. Holding
+  a light's peak over all directions instead leaves the fit free to turn the lobe away from the face and so
+  to brighten the skin.
 Each is a squared log-ratio (the caller divides by sigma^2). Positive parts use softplus (sharpness 20) so
 lights that start negative (the paper's initialisation) still get gradients.
 """
@@ -27,9 +27,8 @@ from deface.render.sh import cosine_lobe_coefficients, sh_basis
 LUMINANCE = (0.2126, 0.7152, 0.0722)
 LUMINANCE_RGB = np.array(LUMINANCE)
 SHARPNESS = 20.0
-LIT_SKIN_SHADING = 0.85
-"""The light on lit cheeks and forehead as a fraction of the key light's peak: a typical cosine of about
-30 degrees between those surfaces and a portrait's key light."""
+KEY_QUANTILE = 0.9
+"""Which quantile of the key light's level over the cheeks and forehead stands for "facing the light"."""
 
 
 def front_directions(count: int = 256) -> torch.Tensor:
@@ -72,11 +71,15 @@ def light_colour_term(lights: torch.Tensor, white: torch.Tensor, directions: tor
     return (share * chroma.pow(2).sum(-1)).sum() / share.sum().clamp_min(1e-6)
 
 
-def lit_skin_level(face: torch.Tensor, diffuse: torch.Tensor, region: torch.Tensor) -> torch.Tensor:
-    """Mean luminance of the light reaching the pixels ``region`` [H, W] (bool): the rendered face [H, W, 3]
-    over its diffuse albedo [H, W, 3] (the irradiance over pi, plus a little specular)."""
-    shading = face[region] / diffuse[region].clamp_min(0.02)
-    return (shading @ torch.tensor(LUMINANCE, dtype=shading.dtype)).mean()
+def key_light_level(light_images: torch.Tensor, diffuse: torch.Tensor, region: torch.Tensor,
+                    quantile: float = KEY_QUANTILE) -> torch.Tensor:
+    """The brightest light's level on the face: the ``quantile`` of the luminance of its render over the
+    diffuse albedo [H, W, 3] (the irradiance over pi, plus a little specular) at the pixels ``region``
+    [H, W] (bool), for per-light renders [K, H, W, 3]. Each light's own render, not the mask-weighted face:
+    cast shadows belong to f, and the key light's brightest cheek or forehead point faces it."""
+    shading = light_images[:, region] / diffuse[region].clamp_min(0.02)  # [K, N, 3]
+    luminance = shading @ torch.tensor(LUMINANCE, dtype=shading.dtype)
+    return torch.quantile(luminance, quantile, dim=1).max()
 
 
 def exposure_term(level: torch.Tensor, target: float) -> torch.Tensor:
