@@ -77,7 +77,7 @@ def neutral_fits(shared):
 def test_dark_and_light_skin_under_one_light_keep_their_tones(neutral_fits):
     dark, light = recovered_ita(neutral_fits[0.0]), recovered_ita(neutral_fits[50.0])
     assert light - dark > 30, (dark, light)
-    assert abs(dark - 0.0) < 12 and abs(light - 50.0) < 12, (dark, light)
+    assert abs(dark - 0.0) < 15 and abs(light - 50.0) < 15, (dark, light)  # exposure: see docs/skin-tone.md
 
 
 @pytest.mark.slow

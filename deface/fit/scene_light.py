@@ -6,9 +6,10 @@ holds only the brightest light to the scene's white level W, and the tone moves 
 step. So the fit starts where the scene says it is:
 - the initial lights are scaled per channel so the brightest one's peak white response is W (their ratios,
   signs and SH structure, which ACE and f depend on, are kept);
-- the tone starts at the ITA of the photo's most lit skin (the brightest tenth of the unclipped cheek and
-  forehead pixels, :mod:`deface.models.ita`: the points facing the key light, clear of cast shadows that
-  cover less than nine tenths of them) divided by W. Stage 2 then refines both;
+- the tone starts at the ITA of the photo's lit skin (unclipped cheek and forehead pixels at least half as
+  bright as their 90th percentile, :mod:`deface.models.ita`, without the brightest tenth, where the
+  specular highlight is - a larger share of a dark skin's light, so leaving it in would lighten dark skins)
+  divided by W and by ``LIT_SKIN_SHADING``. Stage 2 then refines both;
 - the skin pixels of the cheeks and forehead are kept (``context.lit_skin``) for the scene-light prior's
   level term.
 """
@@ -20,7 +21,11 @@ import torch
 
 from deface.io.images import linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import KEY_QUANTILE, LUMINANCE, front_directions, peak_white
-from deface.models.ita import CLIPPED, in_tone_boxes, ita_of_srgb, pixel_uvs
+from deface.models.ita import CLIPPED, in_tone_boxes, ita_of_srgb, lit_skin, pixel_uvs
+
+LIT_SKIN_SHADING = 0.85
+"""The light on lit cheeks and forehead as a fraction of the key light's level facing it: a typical cosine of
+about 30 degrees between those surfaces and a portrait's key light."""
 
 
 def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Tensor:
@@ -52,8 +57,8 @@ def photo_skin_ita(context, regions: list[np.ndarray], white: np.ndarray) -> flo
     if len(srgb) < 12:
         return None
     luminance = srgb_to_linear(srgb) @ np.asarray(LUMINANCE)
-    brightest = srgb[luminance >= np.percentile(luminance, 100 * KEY_QUANTILE)]
-    albedo = np.median(srgb_to_linear(brightest), axis=0) / np.asarray(white)
+    lit = lit_skin(srgb) & (luminance <= np.percentile(luminance, 100 * KEY_QUANTILE))
+    albedo = np.median(srgb_to_linear(srgb[lit]), axis=0) / (np.asarray(white) * LIT_SKIN_SHADING)
     return ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
 
 

@@ -43,7 +43,7 @@ class FrameRender:
     face_region: torch.Tensor  # [H, W] M_o
     face: torch.Tensor  # [H, W, 3] I_R
     region_probability: torch.Tensor | None = None  # [H, W] g (None without the field g)
-    diffuse: torch.Tensor | None = None  # [H, W, 3] screen-space diffuse albedo of the render
+    normals: torch.Tensor | None = None  # [H, W, 3] unit normals of the render (model frame)
 
 
 class StageContext:
@@ -82,9 +82,9 @@ class StageContext:
         """The scene-light level term of one frame: the brightest light's level on the cheeks and forehead
         (0 when off)."""
         tone, region = self.config.tone, self.lit_skin[frame] if self.lit_skin else None
-        if not tone.scene_light_prior or self.illuminant is None or region is None or rendered.diffuse is None:
+        if not tone.scene_light_prior or self.illuminant is None or region is None or rendered.normals is None:
             return torch.zeros(())
-        level = key_light_level(rendered.light_images, rendered.diffuse, region)
+        level = key_light_level(self.scene.lights[self.decoupling.kept], rendered.normals, region)
         target = float(self.illuminant.white @ LUMINANCE_RGB)
         return tone.weight * exposure_term(level, target) / tone.exposure_sigma**2
 
@@ -95,15 +95,15 @@ class StageContext:
         kept = self.decoupling.kept
         output = self.renderer.shade(geometry.mesh, geometry.camera, fragments, textures,
                                      self.scene.lights[kept], transfer)
-        return self.compose(frame, output.images, output.mask, output.diffuse)
+        return self.compose(frame, output.images, output.mask, output.normals)
 
     def compose(self, frame: int, light_images: torch.Tensor, coverage: torch.Tensor,
-                diffuse: torch.Tensor | None = None) -> FrameRender:
+                normals: torch.Tensor | None = None) -> FrameRender:
         light_masks = self.decoupling.light_masks(frame, coverage)
         probability = self.decoupling.region_probability(frame, coverage)
         face_region = self.decoupling.face_region(frame, coverage, self.target.face_classifier[frame], probability)
         face = (light_images * light_masks[..., None]).sum(0)
-        return FrameRender(light_images, coverage, light_masks, face_region, face, probability, diffuse)
+        return FrameRender(light_images, coverage, light_masks, face_region, face, probability, normals)
 
     def _transfer(self, frame: int, mesh, refresh: bool):
         if not self.config.shadows:

@@ -98,7 +98,7 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
 def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, object]:
     """Shade a frozen frame with ``textures`` and the current kept lights; M_o stays frozen."""
     output = _shade(context, frame.geometry.mesh, frame.camera, frame.fragments, textures, frame.transfer)
-    rendered = context.compose(frame.index, output.images, output.mask, output.diffuse)
+    rendered = context.compose(frame.index, output.images, output.mask, output.normals)
     rendered.face_region = frame.face_region
     return rendered, output
 

@@ -8,7 +8,7 @@ among ``directions`` (the front hemisphere), where its luminance is largest.
   light's share of the brightest light's luminance (a dim light - a shadowed condition of f - matters
   less; lights with no positive luminance not at all);
 - exposure: the brightest light's level on the face (:func:`key_light_level`: the 90th percentile over the
-  skin of the cheeks and forehead of its own render over the albedo) matches the estimate's level. Holding
+  skin of the cheeks and forehead of its white response at their normals) matches the estimate's level. Holding
   a light's peak over all directions instead leaves the fit free to turn the lobe away from the face and so
   to brighten the skin.
 Each is a squared log-ratio (the caller divides by sigma^2). Positive parts use softplus (sharpness 20) so
@@ -71,14 +71,14 @@ def light_colour_term(lights: torch.Tensor, white: torch.Tensor, directions: tor
     return (share * chroma.pow(2).sum(-1)).sum() / share.sum().clamp_min(1e-6)
 
 
-def key_light_level(light_images: torch.Tensor, diffuse: torch.Tensor, region: torch.Tensor,
+def key_light_level(lights: torch.Tensor, normals: torch.Tensor, region: torch.Tensor,
                     quantile: float = KEY_QUANTILE) -> torch.Tensor:
-    """The brightest light's level on the face: the ``quantile`` of the luminance of its render over the
-    diffuse albedo [H, W, 3] (the irradiance over pi, plus a little specular) at the pixels ``region``
-    [H, W] (bool), for per-light renders [K, H, W, 3]. Each light's own render, not the mask-weighted face:
-    cast shadows belong to f, and the key light's brightest cheek or forehead point faces it."""
-    shading = light_images[:, region] / diffuse[region].clamp_min(0.02)  # [K, N, 3]
-    luminance = shading @ torch.tensor(LUMINANCE, dtype=shading.dtype)
+    """The brightest light's level on the face: the ``quantile`` over the pixels ``region`` [H, W] (bool) of
+    the luminance of each light's white response at the pixels' normals [H, W, 3], for lights [K, B*B, 3].
+    The lights' own response, not the mask-weighted render: cast shadows belong to f; and not the render
+    over the albedo, whose specular share grows as the skin darkens (a tone-dependent bias)."""
+    response = white_response(lights, normals[region].detach())  # [K, N, 3]
+    luminance = response @ torch.tensor(LUMINANCE, dtype=response.dtype)
     return torch.quantile(luminance, quantile, dim=1).max()
 
 

@@ -139,7 +139,9 @@ def plausible_cct(linear_rgb: np.ndarray, config: IlluminantConfig) -> tuple[flo
     from colour import XYZ_to_xy, xy_to_UCS_uv
     from colour.temperature import uv_to_CCT_Ohno2013
 
-    xyz = _rgb_to_xyz() @ np.maximum(np.asarray(linear_rgb, dtype=np.float64), 1e-6)
+    # The photo's neutral (1, 1, 1) stands for a Planckian light at neutral_cct (planckian_rgb's convention).
+    absolute = np.maximum(np.asarray(linear_rgb, dtype=np.float64), 1e-6) * _planck_linear_rgb(config.neutral_cct)
+    xyz = _rgb_to_xyz() @ absolute
     cct, duv = uv_to_CCT_Ohno2013(xy_to_UCS_uv(XYZ_to_xy(xyz)))
     weight = float(np.exp(-0.5 * (duv / config.duv_sigma) ** 2))
     low, high = config.cct_range
