@@ -31,10 +31,16 @@ def shadowed_face(shared):
 
 
 def _diffuse_error(face, diffuse: torch.Tensor, region: np.ndarray) -> float:
-    """Mean absolute error of the recovered diffuse albedo at the texels seen by ``region``'s pixels."""
-    uv = torch.as_tensor(face.uv[region])
-    error = (sample_texture(diffuse.detach(), uv) - sample_texture(face.textures.diffuse, uv)).abs().mean()
-    return float(error)
+    """Mean absolute error of the recovered diffuse albedo at the texels seen by ``region``'s pixels, after
+    one scale per channel that matches the lit texels' medians: this scene's background is not lit by the
+    face's light, so it says nothing of the light's strength and the albedo's absolute scale is not
+    identifiable from it (docs/skin-tone.md); a baked shadow shows as a darker patch at any scale."""
+    def seen(texture, mask):
+        return sample_texture(texture.detach(), torch.as_tensor(face.uv[mask]))
+
+    lit = (face.coverage > 0.5) & ~face.shadow
+    scale = seen(face.textures.diffuse, lit).median(0).values / seen(diffuse, lit).median(0).values
+    return float((seen(diffuse, region) * scale - seen(face.textures.diffuse, region)).abs().mean())
 
 
 def _fit(face, preset: str):

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -34,6 +36,8 @@ def ict(shared):
 @pytest.fixture(scope="module")
 def bfm_files(ict, tmp_path_factory):
     folder = tmp_path_factory.mktemp("bfm-models")
+    # --models DIR is the only folder searched: it also needs the MediaPipe canonical mesh beside BFM.
+    (folder / "mediapipe-canonical").symlink_to(Path(os.environ["DEFACE_MODELS"]) / "mediapipe-canonical")
     return folder, write_bfm_layout(folder, ict)
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from deface.fit.config import FitConfig
+from deface.fit.config import FitConfig, override
 from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
 from deface.fit.scene import SceneParameters, initial_lights, topology_tensors
@@ -106,6 +106,7 @@ def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | 
     np.random.seed(config.seed)
     log = log or FitLog()
     model = load_face_model(config.model, models_dir)
+    config = _supported_tone(model, config, log)
     context = _stage1(model, target, config, log, models_dir)
     optional = _face_classifier(context, config, models_dir, log)
     if config.tone.scene_light_prior:
@@ -143,13 +144,17 @@ def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog, models_dir
     return StageContext(model, target, scene, decoupling, config, topology_tensors(model), log)
 
 
+def _supported_tone(model, config: FitConfig, log: FitLog) -> FitConfig:
+    """``config`` without ``tone.free_tone`` for a model with no tone axis (BFM's AlbedoMM), said in the log."""
+    if not config.tone.free_tone or model.albedo.tone is not None:
+        return config
+    log.info(f"the {model.name} albedo model has no skin-tone axis: the tone is not free (docs/skin-tone.md)")
+    return override(config, **{"tone.free_tone": False})
+
+
 def _initial_tone(model, config: FitConfig) -> float:
-    """The tone a free-tone fit starts from: the albedo model's own mean skin (a flat prior has no mode)."""
-    if not config.tone.free_tone:
-        return 0.0
-    if model.albedo.tone is None:
-        raise ValueError(f"the {model.name} albedo model has no skin-tone axis: use a preset without tone.free_tone")
-    return model.albedo.tone.reference_ita
+    """The tone a free-tone fit starts from before the scene is read: the model's own mean skin."""
+    return model.albedo.tone.reference_ita if config.tone.free_tone else 0.0
 
 
 def _stage1_config(iterations: int) -> Stage1Config:
