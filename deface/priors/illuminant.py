@@ -51,7 +51,8 @@ class IlluminantConfig:
     dark: float = 0.02
     """Pixels with linear luminance below this are left out (no colour to read)."""
     white_threshold: float = 0.85
-    """sRGB: a pixel whose every channel reaches this (or is clipped) is near white."""
+    """sRGB: a pixel whose every channel reaches this (or is clipped) is near white. A white wall under a
+    strongly coloured light (below ~6000 K its blue channel falls under this) is read by grey world instead."""
     white_fraction: float = 0.1
     """Fraction of the scene that must be near white for the white patch to be used."""
     white_reflectance: float = 0.9

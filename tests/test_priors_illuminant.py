@@ -1,0 +1,147 @@
+"""The scene's illuminant estimate on synthetic scenes with a known light, and the scene-light terms."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from deface.io.images import linear_to_srgb
+from deface.losses.illuminant import (
+    exposure_term,
+    front_directions,
+    key_light_level,
+    light_colour_term,
+    peak_white,
+    white_response,
+)
+from deface.priors.illuminant import IlluminantConfig, estimate_illuminant, planckian_rgb, plausible_cct
+from deface.render.sh import sh_basis, white_light
+
+SIZE = 96
+
+
+def face_mask() -> np.ndarray:
+    yy, xx = np.mgrid[:SIZE, :SIZE]
+    return (xx - SIZE / 2) ** 2 / 20**2 + (yy - SIZE / 2) ** 2 / 26**2 <= 1
+
+
+def grey_world_scene(cct: float, level: float, seed: int = 0) -> np.ndarray:
+    """A room of neutral surfaces averaging 18 % under a Planckian light; the face is dark red (ignored)."""
+    rng = np.random.default_rng(seed)
+    reflectance = np.clip(rng.lognormal(np.log(0.16), 0.5, (SIZE, SIZE, 1)), 0.01, 0.9)
+    reflectance *= 0.18 / reflectance.mean()
+    image = reflectance * level * planckian_rgb(cct)
+    image[face_mask()] = [0.3, 0.02, 0.02]
+    return linear_to_srgb(np.clip(image, 0, 1))
+
+
+@pytest.mark.parametrize("cct", [2700.0, 4000.0, 6504.0, 9000.0])
+def test_grey_world_recovers_the_lights_colour_temperature(cct):
+    estimate = estimate_illuminant([grey_world_scene(cct, 1.0)], [face_mask()])
+    assert estimate.source == "grey world"
+    assert estimate.cct == pytest.approx(cct, rel=0.04)
+    assert estimate.white / estimate.white.sum() == pytest.approx(planckian_rgb(cct) / planckian_rgb(cct).sum(),
+                                                                  abs=0.02)
+
+
+def test_level_follows_the_scene_part_way_from_the_photos_white_point():
+    """Grey world's level moves W from 1 by the weight its spread earns against the exposure prior."""
+    config = IlluminantConfig()
+    weight = config.grey_world_sigma**-2 / (config.grey_world_sigma**-2 + config.exposure_sigma**-2)
+    for level in (0.5, 2.0):
+        estimate = estimate_illuminant([grey_world_scene(6504.0, level)], [face_mask()], config)
+        luminance = float(estimate.white @ np.array([0.2126, 0.7152, 0.0722]))
+        assert luminance == pytest.approx(level**weight, rel=0.08)
+    bright = estimate_illuminant([grey_world_scene(6504.0, 2.0)], [face_mask()]).white
+    dim = estimate_illuminant([grey_world_scene(6504.0, 0.5)], [face_mask()]).white
+    assert (bright > dim).all()
+
+
+def test_the_face_does_not_change_the_estimate():
+    """Only pixels away from the face count: a darker or lighter skin gives the same light."""
+    scene = grey_world_scene(5000.0, 1.0)
+    lighter = scene.copy()
+    lighter[face_mask()] = [0.9, 0.7, 0.6]
+    first, second = (estimate_illuminant([s], [face_mask()]).white for s in (scene, lighter))
+    assert first == pytest.approx(second, rel=1e-6)
+
+
+def test_a_white_backdrop_sets_the_white_level():
+    image = np.full((SIZE, SIZE, 3), 0.9) * planckian_rgb(6000.0) / planckian_rgb(6000.0).max()
+    image[face_mask()] = [0.3, 0.15, 0.1]
+    estimate = estimate_illuminant([linear_to_srgb(image)], [face_mask()])
+    assert estimate.source == "white patch" and estimate.cct == pytest.approx(6000.0, rel=0.05)
+    assert float(estimate.white.max()) == pytest.approx(0.9 / 0.9, rel=0.05)  # level / white reflectance
+
+
+def test_a_coloured_wall_is_not_taken_for_a_coloured_light():
+    """A green wall lies far off the Planckian locus: the estimate stays near the photo's white point."""
+    image = np.zeros((SIZE, SIZE, 3)) + [0.05, 0.3, 0.08]
+    estimate = estimate_illuminant([linear_to_srgb(image)], [face_mask()])
+    assert estimate.colour_weight < 0.05
+    assert estimate.cct == pytest.approx(6504.0, rel=0.05)
+
+
+def test_too_little_scene_falls_back_to_the_white_point():
+    mask = np.ones((SIZE, SIZE), bool)
+    estimate = estimate_illuminant([grey_world_scene(3000.0, 2.0)], [mask])
+    assert estimate.source == "fallback" and estimate.white == pytest.approx(np.ones(3))
+
+
+def test_clips_pool_their_frames():
+    frames = [grey_world_scene(3500.0, 1.0, seed) for seed in range(3)]
+    pooled = estimate_illuminant(frames, [face_mask()] * 3)
+    single = estimate_illuminant(frames[:1], [face_mask()])
+    assert pooled.cct == pytest.approx(3500.0, rel=0.04) and pooled.scene_pixels == pytest.approx(3 * single.scene_pixels, rel=0.02)
+
+
+def test_planckian_colours_round_trip():
+    for cct in (2500.0, 3300.0, 5000.0, 6504.0, 10000.0):
+        found, weight = plausible_cct(planckian_rgb(cct), IlluminantConfig())
+        assert found == pytest.approx(cct, rel=1e-3) and weight == pytest.approx(1.0)
+    assert planckian_rgb(6504.0) == pytest.approx(np.ones(3), abs=1e-6)
+
+
+def test_white_response_is_the_cosine_weighted_radiance_over_pi():
+    """Monte Carlo: W(n) = (1/pi) * integral of L(w) max(n.w, 0) dw for a random band-limited light."""
+    torch.manual_seed(0)
+    lights = torch.randn(1, 9, 3, dtype=torch.float64) * 0.3
+    lights[0, 0] += 2.0
+    normal = torch.tensor([[0.3, -0.2, 0.93]], dtype=torch.float64)
+    normal = normal / normal.norm()
+    directions = torch.randn(400_000, 3, dtype=torch.float64)
+    directions = directions / directions.norm(dim=1, keepdim=True)
+    radiance = sh_basis(directions, 3) @ lights[0]  # [N, 3]
+    cosine = (directions @ normal[0]).clamp_min(0)[:, None]
+    monte_carlo = 4 * math.pi * (radiance * cosine).mean(0) / math.pi
+    assert white_response(lights, normal)[0, 0].numpy() == pytest.approx(monte_carlo.numpy(), rel=0.01)
+
+
+def test_white_light_shows_the_albedo_facing_the_viewer():
+    light = white_light(9)
+    facing = white_response(light, torch.tensor([[0.0, 0.0, 1.0]]))[0, 0]
+    sideways = white_response(light, torch.tensor([[1.0, 0.0, 0.0]]))[0, 0]
+    assert facing.numpy() == pytest.approx(np.ones(3), abs=1e-5)
+    assert sideways.numpy() == pytest.approx(np.full(3, 0.7), abs=1e-5)
+
+
+def test_terms_vanish_at_the_estimate_and_pull_towards_it():
+    white = torch.tensor([1.2, 1.0, 0.7])
+    lights = white_light(3) * white  # its peak white response is `white`, facing the viewer
+    directions = front_directions()
+    assert peak_white(lights, directions)[0].numpy() == pytest.approx(white.numpy(), rel=1e-3)
+    assert float(light_colour_term(lights, white, directions)) == pytest.approx(0.0, abs=1e-8)
+    bluish = (lights * torch.tensor([0.8, 1.0, 1.3])).requires_grad_(True)
+    term = light_colour_term(bluish, white, directions)
+    term.backward()
+    assert float(term.detach()) > 0 and float(bluish.grad[0, 0, 2]) > 0  # less blue lowers the term
+    normals = torch.zeros(4, 4, 3)
+    normals[..., 2] = 1.0
+    region = torch.ones(4, 4, dtype=torch.bool)
+    level = key_light_level(lights, normals, region)
+    assert float(level) == pytest.approx(float(white @ torch.tensor([0.2126, 0.7152, 0.0722])), rel=1e-4)
+    assert float(exposure_term(level, float(level))) == pytest.approx(0.0, abs=1e-10)
+    assert float(exposure_term(level * 2, float(level))) == pytest.approx(math.log(2) ** 2, rel=1e-3)
