@@ -95,7 +95,8 @@ def test_clips_pool_their_frames():
     frames = [grey_world_scene(3500.0, 1.0, seed) for seed in range(3)]
     pooled = estimate_illuminant(frames, [face_mask()] * 3)
     single = estimate_illuminant(frames[:1], [face_mask()])
-    assert pooled.cct == pytest.approx(3500.0, rel=0.04) and pooled.scene_pixels == pytest.approx(3 * single.scene_pixels, rel=0.02)
+    assert pooled.cct == pytest.approx(3500.0, rel=0.04)
+    assert pooled.scene_pixels == pytest.approx(3 * single.scene_pixels, rel=0.02)
 
 
 def test_planckian_colours_round_trip():
