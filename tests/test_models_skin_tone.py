@@ -64,3 +64,5 @@ def test_tone_is_projected_into_the_range():
     tone = torch.tensor(200.0)
     AXIS.clamp_(tone)
     assert float(tone) == AXIS.max_ita
+    AXIS.clamp_(tone, (-50.0, 72.0))
+    assert float(tone) == 72.0

@@ -126,6 +126,10 @@ class ToneConfig:
     """Allowed log-ratio spread of the brightest light's white level around the estimate's."""
     learning_rate: float = 0.3
     """Adam step of the tone (degrees of ITA)."""
+    ita_range: tuple[float, float] = (-50.0, 72.0)
+    """Where the tone's flat prior is (degrees of ITA): human skin, from the darkest skins measured (about -50;
+    Del Bino et al. 2006's dark group is below -30) to the lightest (about 70; their very light group is above
+    55). A fit that would leave it is explaining exposure, not skin."""
     illuminant: IlluminantConfig = field(default_factory=IlluminantConfig)
     """How the scene's illuminant is estimated."""
 

@@ -76,6 +76,6 @@ def start_from_scene(context) -> None:
     if ita is not None:
         with torch.no_grad():
             context.scene.tone.fill_(ita)
-        context.model.albedo.tone.clamp_(context.scene.tone)
+        context.model.albedo.tone.clamp_(context.scene.tone, context.config.tone.ita_range)
         context.log.info(f"skin tone starts at ITA {float(context.scene.tone.detach()):.1f} (the photo's lit "
                          "skin under the scene's light)")

@@ -134,7 +134,7 @@ def run_stage2(context: StageContext) -> list[float]:
         optimiser.step()
         scene.clamp_(context.model.expression_prior)
         if config.tone.free_tone:
-            context.model.albedo.tone.clamp_(scene.tone)
+            context.model.albedo.tone.clamp_(scene.tone, config.tone.ita_range)
         guard.check(loss)
         value = float(loss.detach())
         history.append(value)

@@ -9,8 +9,9 @@ tone is the reference skin darkened or lightened along the direction ITA measure
 not a measured locus: lightness and chroma off the axis come from the albedo prior's brightness and
 haemoglobin components and from stage 3's per-texel maps.
 
-Flat prior: the fit optimises the ITA itself, projected into [min_ita, max_ita] after each step, with no
-cost term, so no tone in the range costs more than another (tests/test_models_skin_tone.py).
+Flat prior: the fit optimises the ITA itself, projected into the human range (``FitConfig.tone.ita_range``)
+after each step, with no cost term, so no tone in the range costs more than another
+(tests/test_fit_skin_tone.py).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ class SkinToneAxis:
     """ITA of the albedo model's own mean skin (scale 1)."""
     min_ita: float = -60.0
     max_ita: float = 85.0
-    """The range a fit may choose from (the human range with a margin); the prior is flat inside."""
+    """The tabulated range (a fit's range, FitConfig.tone.ita_range, lies inside it)."""
 
     @staticmethod
     def through(reference_linear_rgb) -> SkinToneAxis:
@@ -77,7 +78,9 @@ class SkinToneAxis:
         reference = self.linear_rgb(torch.tensor(self.reference_ita, dtype=ita.dtype))
         return self.linear_rgb(ita) / reference
 
-    def clamp_(self, ita: torch.Tensor) -> None:
-        """Project ``ita`` into the axis's range in place (the flat prior's support)."""
+    def clamp_(self, ita: torch.Tensor, ita_range: tuple[float, float] | None = None) -> None:
+        """Project ``ita`` in place into ``ita_range`` (the flat prior's support; FitConfig.tone.ita_range),
+        within the tabulated range."""
+        low, high = ita_range or (self.min_ita, self.max_ita)
         with torch.no_grad():
-            ita.clamp_(self.min_ita, self.max_ita)
+            ita.clamp_(max(low, self.min_ita), min(high, self.max_ita))
