@@ -26,13 +26,18 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
     paper, deface = _flatten(to_dict(presets.get("paper"))), _flatten(to_dict(presets.get("deface")))
     changed = {key: deface[key] for key in paper if paper[key] != deface[key]}
     assert changed == {"preset": "deface", "decouple.face_region": False, "decouple.epsilon": 0.09,
-                       "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES,
-                       "tone.free_tone": True, "tone.scene_light_prior": True}  # docs/skin-tone.md
+                       "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES}
+
+
+def test_deface_tone_is_deface_with_the_skin_tone_work():
+    deface, tone = _flatten(to_dict(presets.get("deface"))), _flatten(to_dict(presets.get("deface-tone")))
+    changed = {key: tone[key] for key in deface if deface[key] != tone[key]}
+    assert changed == {"preset": "deface-tone", "tone.free_tone": True, "tone.scene_light_prior": True}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():
     """NextFace's and the paper's numbers must not move with the skin-tone work."""
-    for name in ("paper", "nextface", "nextface-star", "code-images", "code-video", "code-portrait"):
+    for name in ("default", "paper", "nextface", "nextface-star", "code-images", "code-video", "code-portrait"):
         tone = presets.get(name).tone
         assert not tone.free_tone and not tone.scene_light_prior, name
 
