@@ -105,3 +105,15 @@ def test_prior_cost_is_flat_over_tone(neutral_fits):
             context.scene.tone.fill_(ita)
             costs.append(float(_stage2_loss(context, before_ace=False, refresh_shadows=False)))
     assert np.ptp(costs) <= 1e-6 * max(abs(c) for c in costs)
+
+
+def test_params_record_the_tone_and_the_scene_light(neutral_fits, tmp_path):
+    import json
+
+    from deface.export.outputs import write_fit
+
+    folder = write_fit(neutral_fits[50.0], tmp_path / "fit", {"path": "synthetic", "kind": "image", "frames": [0]})
+    params = json.loads((folder / "params.json").read_text())
+    assert params["skin_tone"]["free"] and abs(params["skin_tone"]["ita"] - 50.0) < 15
+    assert params["illuminant"]["source"] == "grey world"
+    assert params["illuminant"]["cct"] == pytest.approx(6504, rel=0.05)
