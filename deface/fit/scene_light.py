@@ -10,7 +10,7 @@ step. So the fit starts where the scene says it is:
   bright as their 90th percentile, :mod:`deface.models.ita`, without the brightest tenth, where the
   specular highlight is - a larger share of a dark skin's light, so leaving it in would lighten dark skins)
   divided by W and by ``LIT_SKIN_SHADING``. Stage 2 then refines both;
-- the skin pixels of the cheeks and forehead are kept (``context.lit_skin``) for the scene-light prior's
+- the skin pixels of the cheeks and forehead are kept (``context.tone_regions``) for the scene-light prior's
   level term.
 """
 
@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from deface.io.images import linear_to_srgb, srgb_to_linear
-from deface.losses.illuminant import KEY_QUANTILE, LUMINANCE, front_directions, peak_white
+from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
+from deface.losses.illuminant import KEY_QUANTILE, front_directions, peak_white
 from deface.models.ita import CLIPPED, in_tone_boxes, ita_of_srgb, lit_skin, pixel_uvs
 
 LIT_SKIN_SHADING = 0.85
@@ -31,14 +31,14 @@ about 30 degrees between those surfaces and a portrait's key light."""
 def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Tensor:
     """``lights`` [n, B*B, 3] scaled per channel so the brightest light's peak white response is ``white``."""
     peak = peak_white(lights, front_directions())  # [n, 3]
-    brightest = peak[int((peak @ torch.tensor(LUMINANCE)).argmax())]
+    brightest = peak[int((peak @ torch.as_tensor(LUMINANCE, dtype=torch.float32)).argmax())]
     if bool((brightest <= 0).any()):
         return lights
     return lights * (torch.as_tensor(white, dtype=lights.dtype) / brightest)
 
 
 @torch.no_grad()
-def lit_skin_regions(context) -> list[np.ndarray]:
+def tone_regions(context) -> list[np.ndarray]:
     """Per frame [H, W] bool: pixels showing the cheeks and forehead that h calls skin."""
     regions = []
     for frame in range(context.target.num_frames):
@@ -56,7 +56,7 @@ def photo_skin_ita(context, regions: list[np.ndarray], white: np.ndarray) -> flo
     srgb = srgb[srgb.max(-1) < CLIPPED]
     if len(srgb) < 12:
         return None
-    luminance = srgb_to_linear(srgb) @ np.asarray(LUMINANCE)
+    luminance = srgb_to_linear(srgb) @ LUMINANCE
     lit = lit_skin(srgb) & (luminance <= np.percentile(luminance, 100 * KEY_QUANTILE))
     albedo = np.median(srgb_to_linear(srgb[lit]), axis=0) / (np.asarray(white) * LIT_SKIN_SHADING)
     return ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
@@ -67,9 +67,9 @@ def start_from_scene(context) -> None:
     white = context.illuminant.white
     with torch.no_grad():
         context.scene.lights.copy_(lights_scaled_to_white(context.scene.lights, white))
-    regions = lit_skin_regions(context)
+    regions = tone_regions(context)
     if sum(int(r.sum()) for r in regions) >= 12:
-        context.lit_skin = [torch.as_tensor(r) for r in regions]
+        context.tone_regions = [torch.as_tensor(r) for r in regions]
     if not context.config.tone.free_tone:
         return
     ita = photo_skin_ita(context, regions, white)

@@ -17,9 +17,9 @@ from deface.fit.decoupling import Decoupling
 from deface.fit.guard import StepGuard
 from deface.fit.scene import SceneParameters, frame_geometry
 from deface.fit.target import FitTarget
+from deface.io.images import LUMINANCE
 from deface.losses import decouple as decouple_losses
 from deface.losses.illuminant import (
-    LUMINANCE_RGB,
     exposure_term,
     front_directions,
     key_light_level,
@@ -56,7 +56,7 @@ class StageContext:
         self.renderer = Renderer(target.render_config(config))
         self.shadow_caches = [ShadowTransferCache(self.renderer) for _ in range(target.num_frames)]
         self.illuminant: IlluminantEstimate | None = None  # the scene's light, set after stage 1
-        self.lit_skin: list[torch.Tensor] = []  # per frame [H, W] bool: skin of the cheeks and forehead
+        self.tone_regions: list[torch.Tensor] = []  # per frame [H, W] bool: skin of the cheeks and forehead
         self._directions = front_directions()
 
     def geometry(self, frame: int):
@@ -78,14 +78,14 @@ class StageContext:
         colour = light_colour_term(self.scene.lights[self.decoupling.kept], white, self._directions)
         return tone.weight * colour / tone.colour_sigma**2
 
-    def lit_skin_exposure(self, frame: int, rendered: FrameRender) -> torch.Tensor:
+    def key_light_exposure(self, frame: int, rendered: FrameRender) -> torch.Tensor:
         """The scene-light level term of one frame: the brightest light's level on the cheeks and forehead
         (0 when off)."""
-        tone, region = self.config.tone, self.lit_skin[frame] if self.lit_skin else None
+        tone, region = self.config.tone, self.tone_regions[frame] if self.tone_regions else None
         if not tone.scene_light_prior or self.illuminant is None or region is None or rendered.normals is None:
             return torch.zeros(())
         level = key_light_level(self.scene.lights[self.decoupling.kept], rendered.normals, region)
-        target = float(self.illuminant.white @ LUMINANCE_RGB)
+        target = float(self.illuminant.white @ LUMINANCE)
         return tone.weight * exposure_term(level, target) / tone.exposure_sigma**2
 
     def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool, geometry=None) -> FrameRender:
@@ -170,7 +170,7 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool)
         total = total + weights.photometric * context.photometric(frame, rendered)
         total = total + weights.landmarks * context.target.landmark_loss(geometry, frame)
         total = total + _decoupling_terms(context, frame, rendered, before_ace)
-        total = total + context.lit_skin_exposure(frame, rendered)
+        total = total + context.key_light_exposure(frame, rendered)
     total = total / context.target.num_frames
     total = total + weights.sh_regulariser * scene.lights[context.decoupling.kept].pow(2).mean()
     total = total + weights.albedo_prior * scene.albedo.pow(2).mean()

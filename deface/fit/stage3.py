@@ -161,7 +161,7 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, h
     weights, priors, form = context.config.weights, context.config.priors, context.config.decouple.loss_form
     rendered, output = render_frozen(context, frame, textures)
     loss = weights.photometric * context.photometric(frame.index, rendered)
-    loss = loss + context.lit_skin_exposure(frame.index, rendered)
+    loss = loss + context.key_light_exposure(frame.index, rendered)
     if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         loss = loss + weights.binary * decouple_losses.binary_loss(rendered.light_masks, rendered.coverage,
                                                                    form=form)

@@ -19,13 +19,11 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 
+from deface.io.images import LUMINANCE
 from deface.render.sh import cosine_lobe_coefficients, sh_basis
 
-LUMINANCE = (0.2126, 0.7152, 0.0722)
-LUMINANCE_RGB = np.array(LUMINANCE)
 SHARPNESS = 20.0
 KEY_QUANTILE = 0.9
 """Which quantile of the key light's level over the cheeks and forehead stands for "facing the light"."""
@@ -50,7 +48,7 @@ def white_response(lights: torch.Tensor, directions: torch.Tensor) -> torch.Tens
 def peak_white(lights: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
     """[K, 3] each light's white response at its brightest normal."""
     response = white_response(lights, directions)  # [K, N, 3]
-    luminance = response @ torch.tensor(LUMINANCE, dtype=lights.dtype)
+    luminance = response @ torch.as_tensor(LUMINANCE, dtype=lights.dtype)
     best = luminance.argmax(1)
     return response[torch.arange(len(lights)), best]
 
@@ -63,7 +61,7 @@ def light_colour_term(lights: torch.Tensor, white: torch.Tensor, directions: tor
     """Squared log-chromaticity distance of kept lights [K, B*B, 3] from ``white`` [3], weighted by each
     light's share of the brightest light's peak luminance."""
     peak = peak_white(lights, directions)  # [K, 3]
-    luminance = peak @ torch.tensor(LUMINANCE, dtype=peak.dtype)
+    luminance = peak @ torch.as_tensor(LUMINANCE, dtype=peak.dtype)
     target = torch.log(white.to(peak.dtype))
     log_peak = torch.log(_positive(peak))
     chroma = (log_peak - log_peak.mean(-1, keepdim=True)) - (target - target.mean())
@@ -78,7 +76,7 @@ def key_light_level(lights: torch.Tensor, normals: torch.Tensor, region: torch.T
     The lights' own response, not the mask-weighted render: cast shadows belong to f; and not the render
     over the albedo, whose specular share grows as the skin darkens (a tone-dependent bias)."""
     response = white_response(lights, normals[region].detach())  # [K, N, 3]
-    luminance = response @ torch.tensor(LUMINANCE, dtype=response.dtype)
+    luminance = response @ torch.as_tensor(LUMINANCE, dtype=response.dtype)
     return torch.quantile(luminance, quantile, dim=1).max()
 
 

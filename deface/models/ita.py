@@ -22,6 +22,8 @@ import numpy as np
 import torch
 from skimage.color import rgb2lab
 
+from deface.io.images import GAMMA, LUMINANCE
+
 # (u0, u1, y0, y1) with y = 1 - v measured downward from the texture image's top (ICT layout).
 TONE_BOXES = {
     "left_cheek": (0.195, 0.342, 0.42, 0.547),
@@ -79,7 +81,7 @@ def lit_skin(pixels_srgb: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=bool)
     pixels_srgb = np.clip(pixels_srgb, 0.0, 1.0)  # resampling can overshoot [0, 1] slightly
     unclipped = pixels_srgb.max(-1) < CLIPPED
-    luminance = (pixels_srgb**2.2) @ np.array([0.2126, 0.7152, 0.0722])
+    luminance = (pixels_srgb**GAMMA) @ LUMINANCE
     bright = np.percentile(luminance[unclipped], 90) if unclipped.any() else np.inf
     return unclipped & (luminance >= SHADOW_FRACTION * bright)
 

@@ -33,6 +33,8 @@ from typing import Protocol
 import cv2
 import numpy as np
 
+from deface.io.images import LUMINANCE
+
 # Feature landmark groups (indices into MediaPipe's 468/478-point face mesh, from its connection lists).
 MEDIAPIPE_FEATURES = {
     "lips": (0, 13, 14, 17, 37, 39, 40, 61, 78, 80, 81, 82, 84, 87, 88, 91, 95, 146, 178, 181, 185, 191, 267,
@@ -167,7 +169,7 @@ class SkinColourClassifier:
         feature &= region
 
         linear = srgb**2.2
-        luma = linear @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+        luma = linear @ LUMINANCE.astype(np.float32)
         reliable = (luma > cfg.dark_luma) & (srgb.max(axis=-1) < cfg.bright_value)
         core = cv2.erode((region & ~feature).astype(np.uint8), _disk(round(cfg.core_erosion * diagonal)))
         core = core.astype(bool) & reliable

@@ -35,9 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from deface.io.images import srgb_to_linear
-
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 / sRGB
+from deface.io.images import LUMINANCE, srgb_to_linear
 
 
 @dataclass(frozen=True)
