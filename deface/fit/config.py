@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any, Literal
 
 from deface.priors.illuminant import IlluminantConfig
+from deface.texture.completion import CompletionConfig
 
 
 @dataclass(frozen=True)
@@ -153,6 +154,8 @@ class FitConfig:
     learning_rates: LearningRates = field(default_factory=LearningRates)
     priors: PriorConfig = field(default_factory=PriorConfig)
     tone: ToneConfig = field(default_factory=ToneConfig)
+    completion: CompletionConfig = field(default_factory=CompletionConfig)
+    """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
     supersampling: int = 2
     """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
     render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between
