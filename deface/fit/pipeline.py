@@ -19,7 +19,7 @@ from deface.fit.stage1 import Stage1Config, fit_landmarks
 from deface.fit.stage2 import FrameRender, StageContext, run_stage2
 from deface.fit.stage3 import FrozenFrame, relight_frozen, render_frozen, run_stage3
 from deface.fit.target import FitTarget, scale_landmarks, working_frames
-from deface.fit.texels import complete_textures, frame_views, seen_texels, texture_confidence
+from deface.fit.texels import complete_textures, seen_texels, texture_confidence
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.registry import load_face_model
@@ -128,14 +128,13 @@ def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | 
     log.start("stage 3")
     stage3 = run_stage3(context, human_prior)
     log.stop("stage 3")
-    result = FitResult(context, stage3.frozen, stage3.textures, stage3.initial, log, optional)
+    result = FitResult(context, stage3.frozen, stage3.textures, stage3.initial, log, optional, views=stage3.views)
     return _finish_textures(result, config, log)
 
 
 def _finish_textures(result: FitResult, config: FitConfig, log: FitLog) -> FitResult:
     """Complete the texels no frame showed, and measure how well the frames constrain each texel."""
     log.start("textures")
-    result.views = frame_views(result.context.model, result.frozen, result.textures.diffuse.shape[0])
     result.seen = seen_texels(result.views, [rendered.face_region for rendered in result.render()])
     if config.completion.enabled:
         result.textures = complete_textures(result.context.model, result.textures, result.initial_textures,
