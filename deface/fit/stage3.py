@@ -57,7 +57,7 @@ def texture_gates(context: StageContext, views: list[TexelView], size: int) -> l
     """The pyramid's gates from the frames' texel density (pixels per texel, summed over frames)."""
     config = context.config.texture_pyramid
     density = np.sum([view.density for view in views], axis=0)
-    return level_gates(density, level_sizes(size, config), config.gated)
+    return level_gates(density, level_sizes(size, config), config.gated, config.gate_power)
 
 
 def initial_textures(context: StageContext) -> Textures:
