@@ -14,6 +14,8 @@ from types import UnionType
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 from deface.priors.illuminant import IlluminantConfig
+from deface.texture.completion import CompletionConfig
+from deface.texture.pyramid import PyramidConfig
 
 
 @dataclass(frozen=True)
@@ -274,6 +276,11 @@ class FitConfig:
     """Texture priors of stage 3."""
     tone: ToneConfig = field(default_factory=ToneConfig)
     """Skin tone and the scene's light."""
+    texture_pyramid: PyramidConfig = field(default_factory=PyramidConfig)
+    """How stage 3 parametrises the UV maps (deface/texture/pyramid.py): levels gated by the photos' pixels per
+    texel, so no texel is freer than the photos make it."""
+    completion: CompletionConfig = field(default_factory=CompletionConfig)
+    """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
     render: RenderSettings = field(default_factory=RenderSettings)
     """The renderer's settings."""
     seed: int = 0
