@@ -180,3 +180,10 @@ def test_config_replays_a_finished_run_bit_exactly(photos, tmp_path):
     assert sorted(arrays[0].files) == sorted(arrays[1].files)
     for name in arrays[0].files:
         assert np.array_equal(arrays[0][name], arrays[1][name]), name
+
+
+def test_eval_pairs_takes_the_same_config_options(tmp_path):
+    """`deface eval pairs` builds its configuration with the same options: a bad --set is a usage error."""
+    result = CliRunner().invoke(app, ["eval", "pairs", str(tmp_path), "-o", str(tmp_path / "out"),
+                                      "--set", "decouple.nothing=1"])
+    assert result.exit_code == 2 and "decouple has no field 'nothing'" in result.output
