@@ -80,6 +80,7 @@ def fit_command(
     face_region: options.FaceRegion = None,
     priors: options.Priors = None,
     resolution: options.Resolution = None,
+    texture_size: options.TextureSize = None,
     iterations: options.Iterations = None,
     max_frames: options.MaxFrames = None,
     frame_stride: options.FrameStride = None,
@@ -97,8 +98,9 @@ def fit_command(
         options.check_models_dir(models)
         config = options.fit_config(
             preset, config_file, sets, model=model, seed=seed, lights=lights, bands=bands, light_masks=light_masks,
-            face_region=face_region, priors=priors, resolution=resolution, iterations=iterations,
-            max_frames=max_frames, frame_stride=frame_stride, face_index=face_index, threads=threads,
+            face_region=face_region, priors=priors, resolution=resolution, texture_size=texture_size,
+            iterations=iterations, max_frames=max_frames, frame_stride=frame_stride, face_index=face_index,
+            threads=threads,
         )
         items = list_inputs(inputs)
     except (InputError, ValueError, OSError) as error:

@@ -46,6 +46,7 @@ class Range:
 # several GB and hours. Lights and bands: each light adds a render per step, each band 2B+1 coefficients.
 RANGES = {
     "--resolution": Range(32, 2048, "a number of pixels (longest side of the working image)"),
+    "--texture-size": Range(16, 4096, "a number of texels (side of the UV maps)"),
     "--lights": Range(1, 16, "a number of light conditions"),
     "--bands": Range(1, 16, "a number of SH bands"),
     "--max-frames": Range(1, 256, "a number of frames"),
@@ -130,6 +131,9 @@ Priors = Annotated[str | None, typer.Option(help="Ablation: priors to use, comma
                                                  "(config: priors.global_prior, local_prior, human_prior)")]
 Resolution = Annotated[int | None, typer.Option(help="Working resolution (longest side, 32-2048 px). "
                                                      "(config: resolution)")]
+TextureSize = Annotated[int | None, typer.Option("--texture-size", help="UV texture side (16-4096 texels; the "
+                                                                     "preset's default is 512). (config: "
+                                                                     "texture_size)")]
 Iterations = Annotated[str | None, typer.Option(help="Iterations per stage as S1,S2,S3 (e.g. 300,400,200). "
                                                      "(config: iterations.stage1, stage2, stage3)")]
 MaxFrames = Annotated[int | None, typer.Option(help="Video: number of frames used (evenly spread). "
@@ -145,6 +149,7 @@ SHORTCUTS = {
     "--model": "model",
     "--seed": "seed",
     "--resolution": "resolution",
+    "--texture-size": "texture_size",
     "--max-frames": "max_frames",
     "--frame-stride": "frame_stride",
     "--face-index": "face_index",
