@@ -72,9 +72,9 @@ UV_TABLE = ("UV-space textures (issue 12)", [("NextFace", "nextface"), ("Paper p
 # recorded tables (128-px working images, half-length stages), applied to every variant alike.
 SCHEDULES = {
     "full": {},
-    "smoke": {"resolution": 64, "texture_size": 64, "shadow_rays": 16, "iterations.stage1": 20,
+    "smoke": {"resolution": 64, "texture_size": 64, "render.shadow_rays": 16, "iterations.stage1": 20,
               "iterations.stage2": 8, "iterations.stage3": 3, "decouple.ace_iteration": 4},
-    "quick": {"resolution": 128, "texture_size": 256, "shadow_rays": 64, "iterations.stage1": 200,
+    "quick": {"resolution": 128, "texture_size": 256, "render.shadow_rays": 64, "iterations.stage1": 200,
               "iterations.stage2": 200, "iterations.stage3": 100, "decouple.ace_iteration": 50},
 }
 
