@@ -1,0 +1,93 @@
+"""What a (re)run of a batch does with each input: fit it, skip it (finished), or leave it (failed earlier
+and not ``--retry-failed``); and the check that finished outputs were made with the same settings, so a
+resumed batch never silently mixes presets or configs.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from deface.batch.record import latest_states, read_records
+from deface.batch.task import finished_params
+from deface.fit.config import FitConfig, to_dict
+from deface.io.inputs import InputItem
+
+# Config fields that do not change what is fitted: torch threads (a batch worker runs with 1).
+IGNORED_SETTINGS = ("threads",)
+
+
+class SettingsMismatch(ValueError):
+    """Finished outputs in OUT were made with other settings than this run's (one line)."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The inputs of a run, split by what happens to them."""
+
+    todo: list[InputItem]  # to fit
+    finished: list[InputItem]  # output complete: skipped (recorded as such)
+    failed_before: list[InputItem]  # last recorded state failed; redone only with --retry-failed
+
+
+def plan_batch(items: list[InputItem], output: Path, config: FitConfig, overwrite: bool = False,
+               retry_failed: bool = False) -> Plan:
+    """Split ``items``; raises :class:`SettingsMismatch` when finished outputs have other settings
+    (unless ``overwrite``, which redoes everything). ``retry_failed``: only the inputs that failed before."""
+    if overwrite:
+        return Plan(list(items), [], [])
+    states = latest_states(read_records(output))
+    failed = {path for path, record in states.items() if record.status == "failed"}
+    todo, finished, failed_before, mismatched = [], [], [], []
+    for item in items:
+        params = finished_params(output / item.name)
+        if params is not None:
+            finished.append(item)
+            differences = settings_differences(params, config)
+            if differences:
+                mismatched.append((params, differences))
+        elif str(item.path) in failed:
+            (todo if retry_failed else failed_before).append(item)
+        elif not retry_failed:
+            todo.append(item)
+    if mismatched:
+        params, differences = mismatched[0]
+        raise SettingsMismatch(
+            f"{len(mismatched)} finished output(s) in {output} were made with other settings (e.g. {params}: "
+            f"{'; '.join(differences[:4])}); rerun with the same settings, use --overwrite to redo them, "
+            f"or write to another -o")
+    return Plan(todo, finished, failed_before)
+
+
+def settings_differences(params_file: Path, config: FitConfig) -> list[str]:
+    """How the preset/config recorded in a finished ``params.json`` differs from ``config`` ([] = same).
+
+    A params.json without a config (not written by ``deface fit``) cannot be compared and is accepted.
+    """
+    try:
+        recorded = json.loads(params_file.read_text())
+    except (OSError, ValueError):
+        return [f"unreadable {params_file.name}"]
+    if not isinstance(recorded, dict) or "config" not in recorded:
+        return []
+    differences = []
+    if recorded.get("preset") != config.preset:
+        differences.append(f"preset '{recorded.get('preset')}' (this run: '{config.preset}')")
+    old, new = _flat(recorded["config"]), _flat(json.loads(json.dumps(to_dict(config))))
+    for key in sorted(set(old) | set(new)):
+        if key.split(".")[0] in IGNORED_SETTINGS or key == "preset":
+            continue
+        if old.get(key, "(absent)") != new.get(key, "(absent)"):
+            differences.append(f"{key} {old.get(key, '(absent)')} (this run: {new.get(key, '(absent)')})")
+    return differences
+
+
+def _flat(tree: dict, prefix: str = "") -> dict:
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
