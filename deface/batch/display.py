@@ -23,7 +23,7 @@ class Tally:
     done: int = 0
     failed: int = 0
     busy: int = 0  # another run holds its output folder
-    left: int = 0  # failed in an earlier run, not retried
+    left: int = 0  # not attempted in this run (--retry-failed: never failed)
 
     @property
     def remaining(self) -> int:
@@ -31,7 +31,7 @@ class Tally:
 
     def summary(self) -> str:
         busy = f", {self.busy} left to another run" if self.busy else ""
-        left = f", {self.left} failed earlier (not retried)" if self.left else ""
+        left = f", {self.left} not attempted (--retry-failed)" if self.left else ""
         return f"{self.done} of {self.total} input(s) done, {self.failed} failed{busy}{left}"
 
 

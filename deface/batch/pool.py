@@ -22,6 +22,7 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
+from pathlib import Path
 from typing import Any, Protocol
 
 STOP_GRACE_SECONDS = 30.0  # how long a stopping worker may take to clean up before it is killed
@@ -67,6 +68,7 @@ class LocalPool:
     warm: Callable[..., None] | None = None
     warm_args: tuple = ()
     retries: int = 1  # extra attempts for a job whose worker died
+    stderr: Path | None = None  # workers' native stderr (MediaPipe/TFLite chatter, crash reports) appended here
     _context: Any = field(default_factory=lambda: multiprocessing.get_context("spawn"), repr=False)
 
     def run(self, jobs: Sequence[Any], listener: Listener) -> None:
@@ -113,7 +115,8 @@ class LocalPool:
 
     def _start(self, number: int) -> _Worker:
         parent, child = self._context.Pipe()
-        process = self._context.Process(target=_worker_main, args=(child, self.task, self.warm, self.warm_args),
+        process = self._context.Process(target=_worker_main, args=(child, self.task, self.warm, self.warm_args,
+                                                                       self.stderr),
                                         name=f"deface-worker-{number}", daemon=True)
         previous = signal.getsignal(signal.SIGINT)
         if previous is not None:
@@ -182,7 +185,11 @@ def _stop(workers: list[_Worker]) -> None:
         worker.connection.close()
 
 
-def _worker_main(connection: Connection, task, warm, warm_args: tuple) -> None:
+def _worker_main(connection: Connection, task, warm, warm_args: tuple, stderr: Path | None) -> None:
+    if stderr is not None:
+        descriptor = os.open(stderr, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+        os.dup2(descriptor, 2)
+        os.close(descriptor)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _raise_stopped)
     _die_with_parent()

@@ -1,6 +1,6 @@
-"""What a (re)run of a batch does with each input: fit it, skip it (finished), or leave it (failed earlier
-and not ``--retry-failed``); and the check that finished outputs were made with the same settings, so a
-resumed batch never silently mixes presets or configs.
+"""What a (re)run of a batch does with each input: fit it, skip it (finished), or leave it (``--retry-failed``
+redoes only the inputs whose last record is a failure); and the check that finished outputs were made with
+the same settings, so a resumed batch never silently mixes presets or configs.
 """
 
 from __future__ import annotations
@@ -28,18 +28,19 @@ class Plan:
 
     todo: list[InputItem]  # to fit
     finished: list[InputItem]  # output complete: skipped (recorded as such)
-    failed_before: list[InputItem]  # last recorded state failed; redone only with --retry-failed
+    left: list[InputItem]  # unfinished but not attempted: --retry-failed and no failure recorded
 
 
 def plan_batch(items: list[InputItem], output: Path, config: FitConfig, overwrite: bool = False,
                retry_failed: bool = False) -> Plan:
     """Split ``items``; raises :class:`SettingsMismatch` when finished outputs have other settings
-    (unless ``overwrite``, which redoes everything). ``retry_failed``: only the inputs that failed before."""
+    (unless ``overwrite``, which redoes everything). A plain rerun fits every unfinished input;
+    ``retry_failed`` only those whose last record in ``OUT/batch.jsonl`` is a failure."""
     if overwrite:
         return Plan(list(items), [], [])
     states = latest_states(read_records(output))
     failed = {path for path, record in states.items() if record.status == "failed"}
-    todo, finished, failed_before, mismatched = [], [], [], []
+    todo, finished, left, mismatched = [], [], [], []
     for item in items:
         params = finished_params(output / item.name)
         if params is not None:
@@ -47,9 +48,9 @@ def plan_batch(items: list[InputItem], output: Path, config: FitConfig, overwrit
             differences = settings_differences(params, config)
             if differences:
                 mismatched.append((params, differences))
-        elif str(item.path) in failed:
-            (todo if retry_failed else failed_before).append(item)
-        elif not retry_failed:
+        elif retry_failed and str(item.path) not in failed:
+            left.append(item)
+        else:
             todo.append(item)
     if mismatched:
         params, differences = mismatched[0]
@@ -57,7 +58,7 @@ def plan_batch(items: list[InputItem], output: Path, config: FitConfig, overwrit
             f"{len(mismatched)} finished output(s) in {output} were made with other settings (e.g. {params}: "
             f"{'; '.join(differences[:4])}); rerun with the same settings, use --overwrite to redo them, "
             f"or write to another -o")
-    return Plan(todo, finished, failed_before)
+    return Plan(todo, finished, left)
 
 
 def settings_differences(params_file: Path, config: FitConfig) -> list[str]:

@@ -25,6 +25,7 @@ from deface.fit.log import FitLog
 from deface.io.inputs import InputItem
 
 PROGRESS_SECONDS = 0.5  # a worker reports its stage at most this often
+WORKER_LOG = "batch-workers.log"  # the workers' stderr: native libraries' messages, crash reports
 
 
 class Interrupted(BaseException):
@@ -67,7 +68,7 @@ def run_batch(items: list[InputItem], output: Path, config: FitConfig, models: P
     plan = plan_batch(items, output, config, options.overwrite, options.retry_failed)
     jobs = [Job(item, output, config, models, options.overwrite) for item in plan.todo]
     workers = min(options.jobs or cpu_count(), len(jobs))
-    tally = Tally(len(items), done=len(plan.finished), left=len(plan.failed_before))
+    tally = Tally(len(items), done=len(plan.finished), left=len(plan.left))
     engine = "ray" if options.engine == "ray" else "local" if workers > 1 else "inline"
     batch = BatchRun(output, config, tally, options.verbose, engine, jobs=jobs)
     with BatchDisplay(tally, live=not options.quiet and engine != "inline") as display:
@@ -80,7 +81,9 @@ def run_batch(items: list[InputItem], output: Path, config: FitConfig, models: P
 
                     run_on_ray(jobs, batch, options)
                 elif engine == "local":
-                    LocalPool(pool_task, workers, warm_worker, (config.model, models)).run(jobs, batch)
+                    output.mkdir(parents=True, exist_ok=True)
+                    LocalPool(pool_task, workers, warm_worker, (config.model, models),
+                              stderr=output / WORKER_LOG).run(jobs, batch)
                 else:
                     for index, job in enumerate(jobs):
                         batch.started(0, index, 1, job)
@@ -111,9 +114,9 @@ class BatchRun:
     def report_plan(self, plan: Plan) -> None:
         for item in plan.finished:
             self.record(item, Outcome("skipped", 0.0), 1)
-        if plan.failed_before:
-            self.display.line(f"{len(plan.failed_before)} input(s) failed in an earlier run and are left as they "
-                              "are (--retry-failed redoes them; `deface batch status OUT` says why)")
+        if plan.left:
+            self.display.line(f"--retry-failed: {len(plan.left)} unfinished input(s) that never failed are left "
+                              "(run without --retry-failed to fit them)")
 
     def started(self, worker: int, index: int, attempt: int, job: Job | None = None) -> None:
         job = job or self.jobs[index]

@@ -52,8 +52,8 @@ def fit_command(
     verbose: bool = typer.Option(False, help="Print the full details (traceback, tool output) of each error."),
     jobs: int = typer.Option(0, "--jobs", "-j", help="Inputs fitted at once, each in its own worker process with "
                              "1 torch thread (0 = one per core; 1 = one after another in this process)."),
-    retry_failed: bool = typer.Option(False, "--retry-failed", help="Redo only the inputs that failed in an "
-                                      "earlier run (OUT/batch.jsonl); a plain rerun leaves them."),
+    retry_failed: bool = typer.Option(False, "--retry-failed", help="Redo only the inputs whose last record in "
+                                      "OUT/batch.jsonl is a failure (a plain rerun fits every unfinished input)."),
     engine: str = typer.Option("local", help="local (this machine) or ray (a Ray cluster; pip install deface[ray])."),
     ray_address: str | None = typer.Option(None, "--ray-address", help="Ray cluster to join (default: RAY_ADDRESS, "
                                            "else a local Ray started for this run)."),
