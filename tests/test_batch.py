@@ -13,12 +13,12 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
-import batch_tasks
+import batch_helpers
 import numpy as np
 import pytest
+from batch_helpers import TINY, arrays, run_deface, wait_for_lock
 from PIL import Image
 from typer.testing import CliRunner
 
@@ -33,7 +33,6 @@ from deface.fit.config import override, to_dict
 from deface.io.inputs import list_inputs
 
 REPO = Path(__file__).resolve().parent.parent
-TINY = ["--preset", "fast", "--iterations", "20,30,5", "--resolution", "64", "--quiet"]
 
 
 def _record(path: str, status: str, attempt: int = 1, error: str | None = None, seconds: float = 1.0):
@@ -165,7 +164,7 @@ def test_pool_retries_a_job_whose_worker_died_once_and_fails_one_that_always_die
     jobs = [("a", "ok", tmp_path), ("b", "die-once", tmp_path), ("c", "die", tmp_path), ("d", "ok", tmp_path),
             ("e", "ok", tmp_path)]
     listener = Collect()
-    LocalPool(batch_tasks.task, 2, batch_tasks.warm, (tmp_path,)).run(jobs, listener)
+    LocalPool(batch_helpers.task, 2, batch_helpers.warm, (tmp_path,)).run(jobs, listener)
     finished = {index: (result[0], attempt) for index, result, attempt in listener.of("finished")}
     assert finished == {0: ("a", 1), 1: ("b", 2), 3: ("d", 1), 4: ("e", 1)}
     died = listener.of("died")
@@ -182,7 +181,7 @@ def test_pool_retries_a_job_whose_worker_died_once_and_fails_one_that_always_die
 def test_pool_workers_run_one_job_at_a_time_and_each_warms_once(tmp_path):
     jobs = [(f"j{i}", "ok", tmp_path) for i in range(6)]
     listener = Collect()
-    LocalPool(batch_tasks.task, 2, batch_tasks.warm, (tmp_path,)).run(jobs, listener)
+    LocalPool(batch_helpers.task, 2, batch_helpers.warm, (tmp_path,)).run(jobs, listener)
     pids = {result[1] for _, result, _ in listener.of("finished")}
     assert len(listener.of("finished")) == 6 and len(pids) <= 2
     assert {p.name.split(".")[1] for p in tmp_path.glob("warm.*")} == {str(pid) for pid in pids}
@@ -197,7 +196,7 @@ def test_pool_stops_its_workers_when_the_parent_is_interrupted(tmp_path):
 
     jobs = [(f"s{i}", "sleep", tmp_path) for i in range(4)]
     with pytest.raises(KeyboardInterrupt):
-        LocalPool(batch_tasks.task, 2).run(jobs, Interrupting())
+        LocalPool(batch_helpers.task, 2).run(jobs, Interrupting())
     pids = [int(path.name.split(".")[1]) for path in tmp_path.glob("*.started")]
     assert len(pids) == 2
     for pid in pids:
@@ -216,27 +215,16 @@ def three_photos(photos, tmp_path_factory) -> Path:
     return folder
 
 
-def _deface(*arguments, **popen) -> subprocess.Popen:
-    command = [sys.executable, "-m", "deface.cli.main", *map(str, arguments)]
-    return subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONPATH": str(REPO)}, **popen)
-
-
-def _arrays(folder: Path) -> dict:
-    with np.load(folder / "params.npz") as data:
-        return {key: data[key] for key in data.files}
-
-
 @pytest.mark.slow
 def test_two_workers_give_the_same_results_as_one_process(three_photos, tmp_path):
     runs = {}
     for jobs in ("1", "2"):
         out = tmp_path / f"jobs{jobs}"
-        process = _deface("fit", three_photos, "-o", out, *TINY, "--jobs", jobs)
+        process = run_deface("fit", three_photos, "-o", out, *TINY, "--jobs", jobs)
         assert process.wait(600) == 0, process.stderr.read()
         runs[jobs] = out
     for name in ("000031", "vd006", "nextface-s1"):
-        one, two = _arrays(runs["1"] / name), _arrays(runs["2"] / name)
+        one, two = arrays(runs["1"] / name), arrays(runs["2"] / name)
         assert one.keys() == two.keys()
         for key in one:
             np.testing.assert_array_equal(one[key], two[key], err_msg=f"{name}: {key}")
@@ -247,23 +235,11 @@ def test_two_workers_give_the_same_results_as_one_process(three_photos, tmp_path
     assert engines == {"local"} and {r.engine for r in read_records(runs["1"])} == {"inline"}
 
 
-def _wait_for_lock(out: Path, process: subprocess.Popen, seconds: float = 300) -> tuple[Path, int]:
-    """The first output lock that a worker holds (its pid is written in it) while it fits."""
-    end = time.monotonic() + seconds
-    while time.monotonic() < end and process.poll() is None:
-        for lock in out.glob(".*.lock"):
-            text = lock.read_text().strip() if lock.exists() else ""
-            if text.isdigit():
-                return lock, int(text)
-        time.sleep(0.1)
-    raise AssertionError(f"no worker took a lock; exit {process.poll()}: {process.stderr.read()}")
-
-
 @pytest.mark.slow
 def test_a_worker_killed_mid_fit_fails_only_its_input_which_is_retried(three_photos, tmp_path):
     out = tmp_path / "out"
-    process = _deface("fit", three_photos, "-o", out, *TINY, "--jobs", "2")
-    lock, pid = _wait_for_lock(out, process)
+    process = run_deface("fit", three_photos, "-o", out, *TINY, "--jobs", "2")
+    lock, pid = wait_for_lock(out, process)
     name = lock.name[1:-len(".lock")]
     os.kill(pid, signal.SIGKILL)
     assert process.wait(600) == 0, process.stderr.read()
@@ -278,8 +254,8 @@ def test_a_worker_killed_mid_fit_fails_only_its_input_which_is_retried(three_pho
 @pytest.mark.slow
 def test_ctrl_c_stops_the_workers_cleanly_and_a_rerun_resumes(three_photos, tmp_path):
     out = tmp_path / "out"
-    process = _deface("fit", three_photos, "-o", out, *TINY, "--jobs", "2")
-    _, pid = _wait_for_lock(out, process)
+    process = run_deface("fit", three_photos, "-o", out, *TINY, "--jobs", "2")
+    _, pid = wait_for_lock(out, process)
     process.send_signal(signal.SIGINT)
     assert process.wait(120) == 130
     lines = [line for line in process.stderr.read().splitlines() if line.startswith("interrupted")]
@@ -289,7 +265,7 @@ def test_ctrl_c_stops_the_workers_cleanly_and_a_rerun_resumes(three_photos, tmp_
         os.kill(pid, 0)  # the worker is gone
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no staging folder, no lock
     done_before = {r.path for r in read_records(out) if r.status == "done"}
-    rerun = _deface("fit", three_photos, "-o", out, *TINY, "--jobs", "2")
+    rerun = run_deface("fit", three_photos, "-o", out, *TINY, "--jobs", "2")
     assert rerun.wait(600) == 0, rerun.stderr.read()
     states = latest_states(read_records(out))
     assert len(states) == 3 and {r.status for r in states.values()} <= {"done", "skipped"}

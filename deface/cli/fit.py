@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 from rich.markup import escape
 
+from deface.batch.ray_engine import RayUnavailable
 from deface.batch.resume import SettingsMismatch
 from deface.batch.run import BatchOptions, Interrupted, run_batch
 from deface.batch.task import error_message
@@ -113,6 +114,9 @@ def run(items: list[InputItem], output: Path, config: FitConfig, models=None, ov
     except SettingsMismatch as error:
         report_error(error)
         raise typer.Exit(EXIT_USAGE) from None
+    except RayUnavailable as error:
+        console.print(f"[red]error:[/red] {escape(str(error))}")
+        raise typer.Exit(EXIT_FAILED) from None
     except Interrupted as stop:
         raise typer.Exit(128 + stop.signum) from None
 
