@@ -38,6 +38,7 @@ class BatchRecord:
     preset: str  # preset name of the run's config
     attempt: int = 1  # 2 = the retry after a worker died
     engine: str = "local"  # "inline" (this process), "local" (worker processes) or "ray"
+    cpu_seconds: float | None = None  # CPU time of the fitting process during the attempt (load-independent)
     finished: str = field(default_factory=lambda: time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
 
     def __post_init__(self) -> None:
@@ -102,6 +103,7 @@ class BatchSummary:
     retried: int  # inputs whose worker died at least once
     fit_seconds: float  # sum of the seconds of done attempts
     mean_seconds: float | None  # per done attempt
+    mean_cpu_seconds: float | None  # CPU time per done attempt (where recorded)
     versions: list[str]
     presets: list[str]
 
@@ -109,6 +111,7 @@ class BatchSummary:
         if not self.inputs:
             return ["no inputs recorded"]
         mean = f", {self.mean_seconds:.1f} s per fitted input" if self.mean_seconds is not None else ""
+        mean += f" ({self.mean_cpu_seconds:.1f} s of CPU)" if self.mean_cpu_seconds is not None else ""
         text = [f"{self.inputs} input(s): {self.done} done, {self.skipped} found finished, {len(self.failed)} failed"
                 f" ({self.retried} retried after a worker died); {self.fit_seconds / 3600:.2f} h of fitting{mean}",
                 f"preset(s): {', '.join(self.presets)}; deface version(s): {', '.join(self.versions)}"]
@@ -130,6 +133,7 @@ def summarise(records: list[BatchRecord]) -> BatchSummary:
         retried=len({r.path for r in records if r.attempt > 1}),
         fit_seconds=sum(r.seconds for r in done),
         mean_seconds=sum(r.seconds for r in done) / len(done) if done else None,
+        mean_cpu_seconds=sum(cpu) / len(cpu) if (cpu := [r.cpu_seconds for r in done if r.cpu_seconds]) else None,
         versions=sorted({r.version for r in records if r.status != "skipped"} or {r.version for r in records}),
         presets=sorted({r.preset for r in states.values()}),
     )

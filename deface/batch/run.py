@@ -170,7 +170,8 @@ class BatchRun:
             path=str(item.path), output=item.name, status=outcome.status, seconds=round(outcome.seconds, 3),
             lights_kept=list(outcome.lights_kept) if outcome.lights_kept is not None else None,
             error=outcome.error, version=deface.__version__, preset=self.config.preset, attempt=attempt,
-            engine=self.engine)
+            engine=self.engine,
+            cpu_seconds=round(outcome.cpu_seconds, 3) if outcome.cpu_seconds is not None else None)
         try:
             append_record(self.output, record)
         except OSError as error:

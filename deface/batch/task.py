@@ -51,6 +51,7 @@ class Outcome:
     seconds: float
     lights_kept: tuple[int, ...] | None = None
     error: str | None = None  # one line (failed, busy)
+    cpu_seconds: float | None = None  # CPU time of the process (all its threads) during this input
     detail: str | None = None  # traceback of a failure, for --verbose
 
 
@@ -74,7 +75,7 @@ def finished_params(folder: Path) -> Path | None:
 
 def run_job(job: Job, log: FitLog) -> Outcome:
     """Fit one input under its output folder's lock; expected and unexpected failures -> "failed"."""
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), time.process_time()
     try:
         with claimed_output(job.folder):
             if finished_params(job.folder) and not job.overwrite:
@@ -84,8 +85,9 @@ def run_job(job: Job, log: FitLog) -> Outcome:
         return Outcome("busy", 0.0, error=str(busy))
     except Exception as error:  # noqa: BLE001 - every failure of one input is one line; the batch goes on
         return Outcome("failed", time.perf_counter() - started, error=error_message(error),
-                       detail="".join(traceback.format_exception(error)).rstrip())
-    return Outcome("done", time.perf_counter() - started, lights_kept=kept)
+                       detail="".join(traceback.format_exception(error)).rstrip(),
+                       cpu_seconds=time.process_time() - cpu)
+    return Outcome("done", time.perf_counter() - started, lights_kept=kept, cpu_seconds=time.process_time() - cpu)
 
 
 def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], list[int]]:
