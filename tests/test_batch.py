@@ -124,6 +124,14 @@ def test_resuming_with_other_settings_is_refused_in_one_line(two_photos, tmp_pat
     assert "preset 'fast' (this run: 'deface')" in lines[0] and not (out / "b").exists()
 
 
+def test_two_inputs_with_one_output_name_are_a_usage_error(two_photos, tmp_path):
+    Image.open(two_photos / "a.png").save(tmp_path / "a.jpg")
+    result = CliRunner().invoke(app, ["fit", str(two_photos), str(tmp_path / "a.jpg"), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 2 and result.output.splitlines() == [
+        f"error: {two_photos / 'a.png'} and {tmp_path / 'a.jpg'} would both write OUT/a; rename one, or fit them "
+        "into different -o folders"]
+
+
 def test_retry_failed_redoes_only_the_failures(two_photos, tmp_path):
     out = tmp_path / "out"
     items = list_inputs([two_photos])

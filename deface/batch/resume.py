@@ -22,6 +22,10 @@ class SettingsMismatch(ValueError):
     """Finished outputs in OUT were made with other settings than this run's (one line)."""
 
 
+class SameOutput(ValueError):
+    """Two inputs would write the same output folder (same file stem); one line."""
+
+
 @dataclass(frozen=True)
 class Plan:
     """The inputs of a run, split by what happens to them."""
@@ -36,6 +40,7 @@ def plan_batch(items: list[InputItem], output: Path, config: FitConfig, overwrit
     """Split ``items``; raises :class:`SettingsMismatch` when finished outputs have other settings
     (unless ``overwrite``, which redoes everything). A plain rerun fits every unfinished input;
     ``retry_failed`` only those whose last record in ``OUT/batch.jsonl`` is a failure."""
+    check_distinct_outputs(items)
     if overwrite:
         return Plan(list(items), [], [])
     states = latest_states(read_records(output))
@@ -59,6 +64,16 @@ def plan_batch(items: list[InputItem], output: Path, config: FitConfig, overwrit
             f"{'; '.join(differences[:4])}); rerun with the same settings, use --overwrite to redo them, "
             f"or write to another -o")
     return Plan(todo, finished, left)
+
+
+def check_distinct_outputs(items: list[InputItem]) -> None:
+    """Each input's output is OUT/<stem>: two inputs with one stem would overwrite (or skip) each other."""
+    seen: dict[str, InputItem] = {}
+    for item in items:
+        other = seen.setdefault(item.name, item)
+        if other is not item:
+            raise SameOutput(f"{other.path} and {item.path} would both write OUT/{item.name}; rename one, or fit "
+                             "them into different -o folders")
 
 
 def settings_differences(params_file: Path, config: FitConfig) -> list[str]:

@@ -9,7 +9,7 @@ import typer
 from rich.markup import escape
 
 from deface.batch.ray_engine import RayUnavailable
-from deface.batch.resume import SettingsMismatch
+from deface.batch.resume import SameOutput, SettingsMismatch
 from deface.batch.run import BatchOptions, Interrupted, run_batch
 from deface.batch.task import error_message
 from deface.cli import options
@@ -105,13 +105,14 @@ def run(items: list[InputItem], output: Path, config: FitConfig, models=None, ov
         quiet: bool = False, verbose: bool = False, batch: BatchOptions | None = None) -> int:
     """Fit and write every input (deface.batch); returns the number that failed (each printed in one line).
 
-    Finished outputs made with other settings are a usage error (exit 2); SIGINT / SIGTERM end the run
+    Finished outputs made with other settings, or two inputs with one output name, are a usage error
+    (exit 2); SIGINT / SIGTERM end the run
     without partial outputs, print one line and exit 130 / 143.
     """
     batch = batch or BatchOptions(jobs=1, overwrite=overwrite, quiet=quiet, verbose=verbose)
     try:
         return run_batch(items, output, config, models, batch)
-    except SettingsMismatch as error:
+    except (SettingsMismatch, SameOutput) as error:
         report_error(error)
         raise typer.Exit(EXIT_USAGE) from None
     except RayUnavailable as error:
