@@ -11,7 +11,7 @@ from pathlib import Path
 
 from deface.batch.record import latest_states, read_records
 from deface.batch.task import finished_params
-from deface.fit.config import FitConfig, to_dict
+from deface.fit.config import FitConfig, flatten, to_dict
 from deface.io.inputs import InputItem
 
 # Config fields that do not change what is fitted: torch threads (a batch worker runs with 1).
@@ -90,20 +90,10 @@ def settings_differences(params_file: Path, config: FitConfig) -> list[str]:
     differences = []
     if recorded.get("preset") != config.preset:
         differences.append(f"preset '{recorded.get('preset')}' (this run: '{config.preset}')")
-    old, new = _flat(recorded["config"]), _flat(json.loads(json.dumps(to_dict(config))))
+    old, new = flatten(recorded["config"]), flatten(json.loads(json.dumps(to_dict(config))))
     for key in sorted(set(old) | set(new)):
         if key.split(".")[0] in IGNORED_SETTINGS or key == "preset":
             continue
         if old.get(key, "(absent)") != new.get(key, "(absent)"):
             differences.append(f"{key} {old.get(key, '(absent)')} (this run: {new.get(key, '(absent)')})")
     return differences
-
-
-def _flat(tree: dict, prefix: str = "") -> dict:
-    flat = {}
-    for key, value in tree.items():
-        if isinstance(value, dict):
-            flat.update(_flat(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat

@@ -184,6 +184,17 @@ def to_dict(config: Any) -> dict:
     return asdict(config)
 
 
+def flatten(tree: dict, prefix: str = "") -> dict:
+    """A nested dict (e.g. ``to_dict(config)``) as dotted paths -> values: ``{"iterations.stage1": 300, ...}``."""
+    flat = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            flat.update(flatten(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
 def override(config: Any, **changes: Any) -> Any:
     """A copy with dotted-path changes: ``override(cfg, **{"lights.num_lights": 3})``."""
     for path, value in changes.items():
