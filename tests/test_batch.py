@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import batch_helpers
@@ -210,6 +211,38 @@ def test_pool_stops_its_workers_when_the_parent_is_interrupted(tmp_path):
     for pid in pids:
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+def test_workers_end_when_their_parent_is_killed(tmp_path):
+    code = ("import sys, batch_helpers\nfrom deface.batch.pool import LocalPool\n"
+            "class Quiet:\n    def __getattr__(self, name):\n        return lambda *args: None\n"
+            "jobs = [(f's{i}', 'sleep', sys.argv[1]) for i in range(4)]\n"
+            "LocalPool(batch_helpers.task, 2).run(jobs, Quiet())\n")
+    parent = subprocess.Popen([sys.executable, "-c", code, str(tmp_path)], cwd=REPO,
+                              env={**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "tests")])})
+    deadline = time.monotonic() + 120
+    while len(list(tmp_path.glob("*.started"))) < 2 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    pids = [int(path.name.split(".")[1]) for path in tmp_path.glob("*.started")]
+    assert len(pids) == 2
+    parent.kill()
+    parent.wait(30)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(_alive(pid) for pid in pids):
+        time.sleep(0.1)
+    assert not any(_alive(pid) for pid in pids)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:
+        with open(f"/proc/{pid}/stat") as stat:  # a zombie (exited, not yet reaped by init) counts as gone
+            return stat.read().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
 
 
 # --- real fits ------------------------------------------------------------------------------------------
