@@ -34,7 +34,9 @@ from deface.export.files import OutputBusy, claimed_output, staged_directory
 from deface.fit.log import FitLog
 from deface.io.inputs import InputItem
 
-TASK_MEMORY = 2 * 1024**3  # bytes a fit may use (a 512 px photo with the default preset peaks near 1.5 GB)
+# Bytes a fit may use: a `--preset fast` batch worker held ~1.0 GB RSS here (ps, the 26 shared photos); the
+# default preset's larger working image and texture need more, hence the margin.
+TASK_MEMORY = 2 * 1024**3
 RETRIES = 1  # extra attempts for a task whose worker or node died
 POLL_SECONDS = 1.0
 
