@@ -1,13 +1,15 @@
 """Batch throughput and a kill-and-resume check of `deface fit --jobs N` (BENCHMARKS.md, "Batches").
 
-    DEFACE_MODELS=../shared/models python benchmarks/batch_throughput.py ../shared/data/images /tmp/batchbench
+    DEFACE_MODELS=../shared/models python benchmarks/batch_throughput.py ../shared/data/images OUT kill-resume
+    DEFACE_MODELS=../shared/models python benchmarks/batch_throughput.py ../shared/data/images OUT throughput [N]
 
-1. kill-resume: `--jobs 2` on every photo, the driver killed with SIGKILL once half the inputs are recorded
-   done (its workers are told by the kernel and remove their staged outputs), then the same command again;
-   checks that every input ends with a complete output and that OUT/batch.jsonl agrees.
-2. throughput: `--jobs 2`, then `--jobs 1`, each into a fresh folder; inputs per hour from the wall time.
-The machine's load average is printed before and after each run (the machine may be shared).
-Writes OUT/results.json and prints a markdown table.
+kill-resume: `--jobs 2` on every photo, the driver killed with SIGKILL once half the inputs are recorded
+  done (its workers are told by the kernel and remove their staged outputs), then the same command again;
+  checks that every input ends with a complete output and that OUT/batch.jsonl agrees.
+throughput: `--jobs 2`, then `--jobs 1`, each into a fresh folder, on the first N photos (default all);
+  inputs per hour from the wall time, and the CPU seconds per input from batch.jsonl.
+The machine's load average is kept before and after each run (the machine may be shared).
+Results go to OUT/results.json (one key per part) and a markdown table is printed.
 """
 
 from __future__ import annotations
@@ -44,7 +46,25 @@ def _run(images: Path, out: Path, jobs: int) -> dict:
             "failed": sum(r.status == "failed" for r in states.values()),
             "inputs_per_hour": round(len(states) * 3600 / seconds, 1),
             "mean_fit_seconds": round(sum(r.seconds for r in states.values()) / max(1, len(states)), 1),
+            "mean_cpu_seconds": _mean([r.cpu_seconds for r in states.values() if r.cpu_seconds]),
             "load_before": load, "load_after": _load()}
+
+
+def _mean(values: list[float]) -> float | None:
+    return round(sum(values) / len(values), 1) if values else None
+
+
+def _subset(images: Path, out: Path, count: int | None) -> Path:
+    """A folder of links to the first ``count`` inputs (all when None)."""
+    if count is None:
+        return images
+    folder = out / f"first{count}"
+    folder.mkdir(parents=True, exist_ok=True)
+    for item in list_inputs([images])[:count]:
+        link = folder / item.path.name
+        if not link.exists():
+            link.symlink_to(item.path.resolve())
+    return folder
 
 
 def _kill_and_resume(images: Path, out: Path, total: int) -> dict:
@@ -71,19 +91,27 @@ def _kill_and_resume(images: Path, out: Path, total: int) -> dict:
 
 
 def main() -> None:
-    images, out = Path(sys.argv[1]), Path(sys.argv[2])
-    total = len(list_inputs([images]))
+    images, out, part = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
     out.mkdir(parents=True, exist_ok=True)
-    results = {"inputs": total, "cpus": os.cpu_count()}
-    results["kill_resume"] = _kill_and_resume(images, out / "kill-resume", total)
-    print(json.dumps(results["kill_resume"], indent=1), flush=True)
-    results["throughput"] = [_run(images, out / f"jobs{jobs}", jobs) for jobs in (2, 1)]
-    (out / "results.json").write_text(json.dumps(results, indent=1))
-    print("| --jobs | wall time (s) | inputs/hour | mean s per input | done | failed | load before -> after |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    for run in results["throughput"]:
-        print(f"| {run['jobs']} | {run['seconds']} | {run['inputs_per_hour']} | {run['mean_fit_seconds']} | "
-              f"{run['done']} | {run['failed']} | {run['load_before']} -> {run['load_after']} |")
+    results_file = out / "results.json"
+    results = json.loads(results_file.read_text()) if results_file.exists() else {}
+    results["cpus"] = os.cpu_count()
+    if part == "kill-resume":
+        results["kill_resume"] = _kill_and_resume(images, out / "kill-resume", len(list_inputs([images])))
+        print(json.dumps(results["kill_resume"], indent=1))
+    else:
+        count = int(sys.argv[4]) if len(sys.argv) > 4 else None
+        subset = _subset(images, out, count)
+        results[f"throughput-{count or 'all'}"] = runs = [_run(subset, out / f"jobs{j}-{count or 'all'}", j)
+                                                          for j in (2, 1)]
+        print("| --jobs | inputs | wall time (s) | inputs/hour | mean s per input | mean CPU s per input | "
+              "load before -> after |")
+        print("| --- | --- | --- | --- | --- | --- | --- |")
+        for run in runs:
+            print(f"| {run['jobs']} | {run['done']} done, {run['failed']} failed | {run['seconds']} | "
+                  f"{run['inputs_per_hour']} | {run['mean_fit_seconds']} | {run['mean_cpu_seconds']} | "
+                  f"{run['load_before']} -> {run['load_after']} |")
+    results_file.write_text(json.dumps(results, indent=1))
 
 
 if __name__ == "__main__":
