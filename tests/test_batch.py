@@ -146,6 +146,23 @@ def test_retry_failed_redoes_only_the_failures(two_photos, tmp_path):
     assert [i.name for i in plan.todo] == ["a"] and [i.name for i in plan.finished] == ["b"]
 
 
+def test_retry_failed_on_the_command_line_attempts_only_the_failed_input(two_photos, tmp_path, monkeypatch):
+    out, attempted = tmp_path / "out", []
+
+    def no_face(frames, config, source, **_):
+        attempted.append(Path(source).name)
+        raise ValueError(f"{source}: no face found")
+
+    monkeypatch.setattr(task, "fit", no_face)
+    append_record(out, _record(str(two_photos / "a.png"), "failed", error="no face"))
+    result = CliRunner().invoke(app, ["fit", str(two_photos), "-o", str(out), "--retry-failed", "--quiet"])
+    assert result.exit_code == 1 and attempted == ["a.png"]
+    assert "0 of 2 input(s) done, 1 failed, 1 not attempted (--retry-failed)" in result.output.splitlines()[-1]
+    result = CliRunner().invoke(app, ["fit", str(two_photos), "-o", str(out), "--quiet", "--jobs", "1"])
+    assert attempted == ["a.png", "a.png", "b.png"]  # a plain rerun fits every unfinished input
+    assert [r.status for r in read_records(out)] == ["failed"] * 4
+
+
 # --- the worker pool ------------------------------------------------------------------------------------
 
 
