@@ -182,9 +182,9 @@ def test_two_processes_writing_the_same_output(photo, tmp_path):
     first = _driver("fit", 60, photo, "-o", out, go=go)
     _wait_for(first, "PAUSED in fit")
     second = _driver("fit", 0, photo, "-o", out)
-    assert second.wait(30) == 0 and "is writing it; skipped" in second.stderr.read()
+    assert second.wait(120) == 0 and "is writing it; skipped" in second.stderr.read()
     go.touch()
-    assert first.wait(30) == 0 and json.loads((out / "face" / "params.json").read_text()) == {"frames": 1}
+    assert first.wait(120) == 0 and json.loads((out / "face" / "params.json").read_text()) == {"frames": 1}
 
 
 def test_remove_stale_cleans_only_this_outputs_leftovers(tmp_path):
@@ -240,13 +240,13 @@ def test_signal_ends_the_run_in_one_line_and_a_rerun_resumes(photo, tmp_path, mo
     process = _driver(mode, 60, folder, "-o", out)
     _wait_for(process, "PAUSED")
     process.send_signal(sent)
-    assert process.wait(30) == code
+    assert process.wait(120) == code
     lines = [line for line in process.stderr.read().splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith(f"interrupted ({sent.name}) during ")
     assert "0 of 2 input(s) done, 0 failed, 2 not done; run the same command again" in lines[0]
     assert not out.exists() or os.listdir(out) == []  # nothing partial, no lock left
     rerun = _driver(mode, 0, folder, "-o", out)
-    assert rerun.wait(30) == 0 and sorted(os.listdir(out)) == ["batch.jsonl", "face", "other"]
+    assert rerun.wait(120) == 0 and sorted(os.listdir(out)) == ["batch.jsonl", "face", "other"]
 
 
 @pytest.mark.slow
@@ -270,10 +270,10 @@ def test_kill_9_mid_write_leaves_staging_that_the_rerun_removes(photo, tmp_path)
     process = _driver("write", 60, photo, "-o", out)
     _wait_for(process, "PAUSED in write")
     process.kill()
-    process.wait(30)
+    process.wait(120)
     assert [p for p in out.iterdir() if p.name.endswith(".partial")]  # what a kill leaves
     rerun = _driver("write", 0, photo, "-o", out)
-    assert rerun.wait(30) == 0 and sorted(os.listdir(out)) == ["batch.jsonl", "face"]
+    assert rerun.wait(120) == 0 and sorted(os.listdir(out)) == ["batch.jsonl", "face"]
 
 
 # --- NaN / Inf ------------------------------------------------------------------------------------------
