@@ -102,7 +102,10 @@ def run_on_ray(jobs: list[Job], listener, options) -> None:
                 listener.finished(index, index, outcome, attempt)
     finally:
         for ref in running:
-            ray.cancel(ref, force=True)
+            try:
+                ray.cancel(ref, force=True)
+            except Exception:  # noqa: BLE001 - a local Ray that Ctrl-C reached is gone already, with its tasks
+                pass
         if started_here:
             ray.shutdown()
 
