@@ -73,6 +73,15 @@ def test_shared_mode_names_an_input_the_node_cannot_see(tmp_path):
     assert "--ray-outputs driver" in outcome.error
 
 
+def test_a_models_folder_missing_on_the_node_is_named(tmp_path):
+    photo = tmp_path / "a.png"
+    photo.write_bytes(b"not read")
+    job = Job(InputItem(photo, "image"), tmp_path, presets.get("fast"), models=tmp_path / "driver-models")
+    outcome, _ = ray_task(job, b"not read")
+    assert outcome.status == "failed" and outcome.error.startswith(f"--models {tmp_path / 'driver-models'}: not a "
+                                                                   "folder on Ray node ")
+
+
 def test_missing_ray_is_one_line_naming_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)
     with pytest.raises(RayUnavailable, match=r"pip install 'deface\[ray\]'"):

@@ -118,6 +118,10 @@ def _runtime_env() -> dict:
 
 def ray_task(job: Job, input_bytes: bytes | None) -> tuple[Outcome, bytes | None]:
     """One input on a Ray worker: in place (shared filesystem) or in a scratch folder returned as a tar."""
+    if job.models is not None and not Path(job.models).is_dir():
+        return Outcome("failed", 0.0, error=f"--models {job.models}: not a folder on Ray node {socket.gethostname()}; "
+                       "every node needs the model files at that path (or in its ~/.cache/deface/models, without "
+                       "--models)"), None
     if input_bytes is None:
         missing = next((p for p in (job.item.path, job.output) if not Path(p).exists()), None)
         if missing is not None:
