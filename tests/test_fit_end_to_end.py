@@ -21,7 +21,7 @@ from deface.models import load_face_model
 from deface.render.mesh import sample_texture
 
 SHORT = {"iterations.stage1": 100, "iterations.stage2": 120, "iterations.stage3": 60,
-         "decouple.ace_iteration": 40, "resolution": 96, "texture_size": 128, "shadow_rays": 64}
+         "decouple.ace_iteration": 40, "resolution": 96, "texture_size": 128, "render.shadow_rays": 64}
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +64,7 @@ def test_decoupling_keeps_cast_shadow_out_of_texture(shadowed_face):
 
 def test_fits_are_deterministic_for_a_seed(shadowed_face):
     short = {**SHORT, "iterations.stage1": 30, "iterations.stage2": 12, "iterations.stage3": 4,
-             "decouple.ace_iteration": 6, "resolution": 64, "texture_size": 64, "shadow_rays": 16}
+             "decouple.ace_iteration": 6, "resolution": 64, "texture_size": 64, "render.shadow_rays": 16}
     config = override(presets.get("default"), **short)
     small = [shadowed_face.image_srgb[::3, ::3].copy()]
     landmarks = shadowed_face.landmarks
@@ -85,12 +85,17 @@ def test_fit_command_writes_all_outputs(photos, tmp_path):
     kept = params["lights"]["kept"]
     assert kept and set(params["lights"]["sh"]) == {str(k) for k in kept}
     assert params["preset"] == "fast" and params["optional_networks"]["facenet"].startswith("HP off")
-    expected = ["textures/diffuse.png", "textures/specular.png", "textures/roughness.png", "mesh.obj", "mesh.mtl",
+    expected = ["textures/diffuse.png", "textures/specular.png", "textures/roughness.png",
+                "textures/confidence.png", "mesh.obj", "mesh.mtl",
                 "mesh.glb", "params.npz", "render.png", "render_face.png", "masks/face.png", "loss_log.csv"]
     expected += [f"lights/{k}.png" for k in kept] + [f"masks/light_{k}.png" for k in kept]
     for name in expected:
         assert (folder / name).is_file(), name
     assert Image.open(folder / "textures/diffuse.png").size == (256, 256)
+    confidence = np.load(folder / "params.npz")["confidence"].astype(np.float32)
+    assert confidence.shape == (256, 256) and 0 <= confidence.min() and confidence.max() <= 1
+    assert (confidence > 0.05).mean() > 0.05  # the photo shows a good part of the layout...
+    assert confidence[:8].mean() < 0.1 * confidence[96:160].mean()  # ...but hardly the top of the head
     mtl = (folder / "mesh.mtl").read_text()
     assert "map_Kd textures/diffuse.png" in mtl and "map_Pr textures/roughness.png" in mtl
     assert not list(tmp_path.glob(".*partial"))  # no staging folder left behind

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from deface.batch.record import latest_states, read_records
 from deface.batch.task import finished_params
-from deface.fit.config import FitConfig, flatten, to_dict
+from deface.fit.config import FitConfig, differences, from_dict
 from deface.io.inputs import InputItem
 
 # Config fields that do not change what is fitted: torch threads (a batch worker runs with 1).
@@ -87,13 +87,14 @@ def settings_differences(params_file: Path, config: FitConfig) -> list[str]:
         return [f"unreadable {params_file.name}"]
     if not isinstance(recorded, dict) or "config" not in recorded:
         return []
-    differences = []
-    if recorded.get("preset") != config.preset:
-        differences.append(f"preset '{recorded.get('preset')}' (this run: '{config.preset}')")
-    old, new = flatten(recorded["config"]), flatten(json.loads(json.dumps(to_dict(config))))
-    for key in sorted(set(old) | set(new)):
-        if key.split(".")[0] in IGNORED_SETTINGS or key == "preset":
-            continue
-        if old.get(key, "(absent)") != new.get(key, "(absent)"):
-            differences.append(f"{key} {old.get(key, '(absent)')} (this run: {new.get(key, '(absent)')})")
-    return differences
+    try:
+        made = from_dict(recorded["config"])
+    except (ValueError, TypeError) as error:
+        return [f"a config this version cannot read ({str(error).splitlines()[0]})"]
+    changed = []
+    if made.preset != config.preset:
+        changed.append(f"preset '{made.preset}' (this run: '{config.preset}')")
+    for path, (now, then) in differences(config, made).items():
+        if path.split(".")[0] not in IGNORED_SETTINGS and path != "preset":
+            changed.append(f"{path} {then} (this run: {now})")
+    return changed

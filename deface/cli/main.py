@@ -13,6 +13,7 @@ app = typer.Typer(
 SUBCOMMAND_MODULES = (
     "deface.cli.fit",
     "deface.cli.batch",
+    "deface.cli.presets",
     "deface.cli.models",
     "deface.cli.eval",
     "deface.cli.bench",

@@ -121,6 +121,7 @@ def _write_params(result, renders: list, folder: Path, record: dict) -> None:
         roughness=_np(result.textures.roughness).astype(np.float16),
         light_masks=np.stack([_np(r.light_masks) for r in renders]).astype(np.float16),
         face_region=np.stack([_np(r.face_region) for r in renders]).astype(np.float16),
+        **({"confidence": result.confidence.astype(np.float16)} if result.confidence is not None else {}),
         landmarks_2d=np.stack([lm.points for lm in target.landmarks]),
     )
 

@@ -98,7 +98,7 @@ def _deface_tone() -> FitConfig:
 
 
 def _fast() -> FitConfig:
-    return override(_deface(), preset="fast", resolution=192, texture_size=256, shadow_rays=64,
+    return override(_deface(), preset="fast", resolution=192, texture_size=256, **{"render.shadow_rays": 64},
                     iterations=Iterations(stage1=150, stage2=150, stage3=60), **{"decouple.ace_iteration": 50})
 
 
@@ -116,6 +116,20 @@ PRESETS = {
     "nextface-star": lambda: _nextface("nextface-star", restrict_to_face=True),
     "fast": _fast,
 }
+
+
+DESCRIPTIONS = {
+    "paper": "The paper's Table 6: n = 5 lights, f and g, eps = 0.17, 400/200 stage-2/3 steps.",
+    "deface": "The default: the paper's method with M_o = M_R h instead of g, eps = 0.09, n = 3, Fourier f.",
+    "deface-tone": "deface that keeps the skin tone: free tone axis, lights held to the scene's illuminant.",
+    "code-images": "The authors' code config for VoxCeleb2 images (L = 1.5, eps = 0.15).",
+    "code-video": "The authors' code config for VoxCeleb2 videos (L = 1.5, eps = 0.15).",
+    "code-portrait": "The authors' code config for the portrait-shadow set (n = 7, eps = 0.09, 1500 stage-2 steps).",
+    "nextface": "Single-light baseline: one light, no f, no g, no priors; L_pho over the whole render mask.",
+    "nextface-star": "NextFace*: nextface with L_pho restricted to the face region h.",
+    "fast": "deface with fewer steps, 192-px working image and 256-px textures: previews and tests.",
+}
+"""One line per preset (``deface presets``); the module docstring says why each differs from the paper."""
 
 
 def names() -> list[str]:
