@@ -117,8 +117,7 @@ def run(items: list[InputItem], output: Path, config: FitConfig, models=None, ov
     """Fit and write every input (deface.batch); returns the number that failed (each printed in one line).
 
     Finished outputs made with other settings, or two inputs with one output name, are a usage error
-    (exit 2); SIGINT / SIGTERM end the run
-    without partial outputs, print one line and exit 130 / 143.
+    (exit 2); SIGINT / SIGTERM end the run without partial outputs, print one line and exit 130 / 143.
     """
     batch = batch or BatchOptions(jobs=1, overwrite=overwrite, quiet=quiet, verbose=verbose)
     try:
