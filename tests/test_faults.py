@@ -179,7 +179,7 @@ def test_a_second_writer_of_the_same_output_skips_it(photo, tmp_path, fake_fit):
 def test_two_processes_writing_the_same_output(photo, tmp_path):
     out = tmp_path / "out"
     go = tmp_path / "go"
-    first = _driver("fit", 60, photo, "-o", out, go=go)
+    first = _driver("fit", 600, photo, "-o", out, go=go)  # until `go`: the second run may take a minute to start
     _wait_for(first, "PAUSED in fit")
     second = _driver("fit", 0, photo, "-o", out)
     assert second.wait(120) == 0 and "is writing it; skipped" in second.stderr.read()
