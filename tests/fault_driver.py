@@ -11,8 +11,9 @@ from __future__ import annotations
 import os
 import sys
 import time
+from types import SimpleNamespace
 
-import deface.cli.fit as fit_cli
+import deface.batch.task as task
 from deface.export.files import staged_directory
 
 
@@ -31,14 +32,15 @@ def main() -> None:
 
     def slow_fit(frames, config, **_):
         _pause(mode, "fit", float(seconds))
-        return len(frames)
+        decoupling = SimpleNamespace(kept=[0])  # what the record reads of a result
+        return SimpleNamespace(frames=len(frames), context=SimpleNamespace(decoupling=decoupling))
 
     def slow_write(result, folder, record):
         with staged_directory(folder) as staging:
-            (staging / "params.json").write_text(f'{{"frames": {result}}}\n')
+            (staging / "params.json").write_text(f'{{"frames": {result.frames}}}\n')
             _pause(mode, "write", float(seconds))
 
-    fit_cli.fit, fit_cli.write_fit = slow_fit, slow_write
+    task.fit, task.write_fit = slow_fit, slow_write
     sys.argv = ["deface", "fit", *arguments]
     from deface.cli.main import main as deface_main
 

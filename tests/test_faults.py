@@ -22,7 +22,7 @@ import torch
 from PIL import Image
 from typer.testing import CliRunner
 
-import deface.cli.fit as fit_cli
+import deface.batch.task as task
 import deface.export.outputs as outputs
 import deface.fit.stage2 as stage2
 from deface.cli.main import app
@@ -69,11 +69,11 @@ def photo(tmp_path) -> Path:
 @pytest.fixture
 def fake_fit(monkeypatch, tiny_result):
     """`deface fit` with the fit itself replaced by the tiny real result (loading and writing are real)."""
-    monkeypatch.setattr(fit_cli, "fit", lambda frames, config, **_: tiny_result)
+    monkeypatch.setattr(task, "fit", lambda frames, config, **_: tiny_result)
 
 
 def _fit(*arguments) -> tuple[int, list[str]]:
-    result = CliRunner().invoke(app, ["fit", *map(str, arguments), "--quiet"])
+    result = CliRunner().invoke(app, ["fit", *map(str, arguments), "--quiet", "--jobs", "1"])
     assert "Traceback" not in result.output, result.output
     return result.exit_code, result.output.splitlines()
 
@@ -173,18 +173,18 @@ def test_a_second_writer_of_the_same_output_skips_it(photo, tmp_path, fake_fit):
     assert "0 of 1 input(s) done, 0 failed, 1 left to another run" in lines[-1]
     code, lines = _fit(photo, "-o", out)  # the lock is gone with its holder
     assert code == 0 and (out / "face" / "params.json").is_file()
-    assert sorted(p.name for p in out.iterdir()) == ["face"]
+    assert sorted(p.name for p in out.iterdir()) == ["batch.jsonl", "face"]
 
 
 def test_two_processes_writing_the_same_output(photo, tmp_path):
     out = tmp_path / "out"
     go = tmp_path / "go"
-    first = _driver("fit", 60, photo, "-o", out, go=go)
+    first = _driver("fit", 600, photo, "-o", out, go=go)  # until `go`: the second run may take a minute to start
     _wait_for(first, "PAUSED in fit")
     second = _driver("fit", 0, photo, "-o", out)
-    assert second.wait(30) == 0 and "is writing it; skipped" in second.stderr.read()
+    assert second.wait(120) == 0 and "is writing it; skipped" in second.stderr.read()
     go.touch()
-    assert first.wait(30) == 0 and json.loads((out / "face" / "params.json").read_text()) == {"frames": 1}
+    assert first.wait(120) == 0 and json.loads((out / "face" / "params.json").read_text()) == {"frames": 1}
 
 
 def test_remove_stale_cleans_only_this_outputs_leftovers(tmp_path):
@@ -214,7 +214,7 @@ def test_staged_directory_keeps_the_previous_result_on_interrupt(tmp_path):
 
 def _driver(mode: str, seconds: float, *arguments, go: Path | None = None) -> subprocess.Popen:
     """tests/fault_driver.py: `deface fit ARGUMENTS` pausing in the fit or the write (until ``go`` exists)."""
-    command = [sys.executable, str(DRIVER), mode, str(seconds), "--", *map(str, arguments), "--quiet"]
+    command = [sys.executable, str(DRIVER), mode, str(seconds), "--", *map(str, arguments), "--quiet", "--jobs", "1"]
     env = {**os.environ, "PYTHONPATH": str(REPO), "DRIVER_GO": str(go or "")}
     return subprocess.Popen(command, cwd=REPO, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
 
@@ -240,13 +240,13 @@ def test_signal_ends_the_run_in_one_line_and_a_rerun_resumes(photo, tmp_path, mo
     process = _driver(mode, 60, folder, "-o", out)
     _wait_for(process, "PAUSED")
     process.send_signal(sent)
-    assert process.wait(30) == code
+    assert process.wait(120) == code
     lines = [line for line in process.stderr.read().splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith(f"interrupted ({sent.name}) during ")
     assert "0 of 2 input(s) done, 0 failed, 2 not done; run the same command again" in lines[0]
     assert not out.exists() or os.listdir(out) == []  # nothing partial, no lock left
     rerun = _driver(mode, 0, folder, "-o", out)
-    assert rerun.wait(30) == 0 and sorted(os.listdir(out)) == ["face", "other"]
+    assert rerun.wait(120) == 0 and sorted(os.listdir(out)) == ["batch.jsonl", "face", "other"]
 
 
 @pytest.mark.slow
@@ -270,10 +270,10 @@ def test_kill_9_mid_write_leaves_staging_that_the_rerun_removes(photo, tmp_path)
     process = _driver("write", 60, photo, "-o", out)
     _wait_for(process, "PAUSED in write")
     process.kill()
-    process.wait(30)
+    process.wait(120)
     assert [p for p in out.iterdir() if p.name.endswith(".partial")]  # what a kill leaves
     rerun = _driver("write", 0, photo, "-o", out)
-    assert rerun.wait(30) == 0 and sorted(os.listdir(out)) == ["face"]
+    assert rerun.wait(120) == 0 and sorted(os.listdir(out)) == ["batch.jsonl", "face"]
 
 
 # --- NaN / Inf ------------------------------------------------------------------------------------------
@@ -328,10 +328,10 @@ def test_nan_that_repeats_fails_the_input_in_one_line(photo, tmp_path, monkeypat
     def diverging(*_args, **_kwargs):
         raise NonFiniteError("stage 3: loss or parameters became NaN/Inf at 4 steps in a row (step 9)")
 
-    monkeypatch.setattr(fit_cli, "fit", diverging)
+    monkeypatch.setattr(task, "fit", diverging)
     code, lines = _fit(photo, "-o", tmp_path / "out")
-    assert code == 1 and _errors(lines) == ["error: stage 3: loss or parameters became NaN/Inf at 4 steps in a "
-                                            "row (step 9)"]
+    assert code == 1 and _errors(lines) == [f"error: {photo}: stage 3: loss or parameters became NaN/Inf at 4 "
+                                            "steps in a row (step 9)"]
 
 
 # --- fuzzed inputs --------------------------------------------------------------------------------------
@@ -359,7 +359,7 @@ def _fuzzed_inputs(folder: Path, shared: Path) -> list[Path]:
 
 def test_fuzzed_files_of_every_extension_fail_in_one_line_each(tmp_path, shared, monkeypatch):
     paths = _fuzzed_inputs(tmp_path / "in", shared)
-    monkeypatch.setattr(fit_cli, "fit", lambda *a, **k: pytest.fail("a corrupt file reached the fit"))
+    monkeypatch.setattr(task, "fit", lambda *a, **k: pytest.fail("a corrupt file reached the fit"))
     code, lines = _fit(tmp_path / "in", "-o", tmp_path / "out")
     errors = _errors(lines)
     assert code == 1 and len(errors) == len(paths) and len(lines) == len(paths) + 1
@@ -401,7 +401,7 @@ def test_clip_whose_middle_frames_have_no_face_keeps_the_others(tmp_path, face_f
     blank = np.full_like(face_frame, 128)
     clip = _clip(tmp_path / "gap.mp4", [face_frame, blank, blank, face_frame])
     config = override(presets.get("fast"), max_frames=4, resolution=64)
-    frames, indices = fit_cli.load_frames(InputItem(clip, "video"), config)
+    frames, indices = task.load_frames(InputItem(clip, "video"), config)
     work, landmarks, _scale, kept = detect(frames, config, str(clip), video=True)
     assert indices == [0, 1, 2, 3] and kept == [0, 3] and len(work) == len(landmarks) == 2
 
@@ -412,7 +412,7 @@ def test_one_frame_clip_is_one_frame(tmp_path, face_frame):
 
     clip = _clip(tmp_path / "single.mp4", [face_frame])
     config = override(presets.get("fast"), resolution=64)
-    frames, indices = fit_cli.load_frames(InputItem(clip, "video"), config)
+    frames, indices = task.load_frames(InputItem(clip, "video"), config)
     assert indices == [0] and len(frames) == 1
     assert detect(frames, config, str(clip), video=True)[3] == [0]
 
@@ -435,19 +435,19 @@ def test_disk_full_at_the_lock_is_one_line_not_a_bug_report(photo, tmp_path, fak
 
     monkeypatch.setattr("deface.export.files._lock", full)
     code, lines = _fit(photo, "-o", tmp_path / "out")
-    assert code == 1 and _errors(lines) == ["error: [Errno 28] No space left on device: 'lock'"]
+    assert code == 1 and _errors(lines) == [f"error: {photo}: [Errno 28] No space left on device: 'lock'"]
 
 
 def test_multi_line_and_unexpected_errors_are_one_line_with_details_under_verbose(photo, tmp_path, monkeypatch):
     def ffmpeg_like(*_args, **_kwargs):
         raise ValueError("cannot decode\n=== stderr ===\nframe 3: invalid NAL unit\n")
 
-    monkeypatch.setattr(fit_cli, "fit", ffmpeg_like)
+    monkeypatch.setattr(task, "fit", ffmpeg_like)
     code, lines = _fit(photo, "-o", tmp_path / "out")
-    assert code == 1 and _errors(lines) == ["error: cannot decode (more with --verbose)"]
+    assert code == 1 and _errors(lines) == [f"error: {photo}: cannot decode (more with --verbose)"]
     verbose = CliRunner().invoke(app, ["fit", str(photo), "-o", str(tmp_path / "out"), "--verbose"])
     assert "Traceback" in verbose.output and "invalid NAL unit" in verbose.output
-    monkeypatch.setattr(fit_cli, "fit", lambda *a, **k: {}["bug"])
+    monkeypatch.setattr(task, "fit", lambda *a, **k: {}["bug"])
     code, lines = _fit(photo, "-o", tmp_path / "out")
-    assert code == 1 and _errors(lines) == ["error: unexpected KeyError: 'bug' (a bug: please report it with the "
-                                            "output of --verbose)"]
+    assert code == 1 and _errors(lines) == [f"error: {photo}: unexpected KeyError: 'bug' (a bug: please report it "
+                                            "with the output of --verbose)"]

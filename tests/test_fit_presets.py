@@ -4,17 +4,7 @@ says why."""
 from __future__ import annotations
 
 from deface.fit import presets
-from deface.fit.config import to_dict
-
-
-def _flatten(tree: dict, prefix: str = "") -> dict:
-    flat = {}
-    for key, value in tree.items():
-        if isinstance(value, dict):
-            flat.update(_flatten(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
+from deface.fit.config import flatten
 
 
 def test_default_is_the_deface_preset():
@@ -23,7 +13,7 @@ def test_default_is_the_deface_preset():
 
 
 def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
-    paper, deface = _flatten(to_dict(presets.get("paper"))), _flatten(to_dict(presets.get("deface")))
+    paper, deface = flatten(presets.get("paper")), flatten(presets.get("deface"))
     changed = {key: deface[key] for key in paper if paper[key] != deface[key]}
     assert changed == {"preset": "deface", "decouple.face_region": False, "decouple.epsilon": 0.09,
                        "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES,
@@ -31,7 +21,7 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
 
 
 def test_deface_tone_is_deface_with_the_skin_tone_work():
-    deface, tone = _flatten(to_dict(presets.get("deface"))), _flatten(to_dict(presets.get("deface-tone")))
+    deface, tone = flatten(presets.get("deface")), flatten(presets.get("deface-tone"))
     changed = {key: tone[key] for key in deface if deface[key] != tone[key]}
     assert changed == {"preset": "deface-tone", "tone.free_tone": True, "tone.scene_light_prior": True}
 

@@ -2,63 +2,27 @@
 
 from __future__ import annotations
 
-import signal
-import threading
-import time
 import traceback
-from collections.abc import Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.markup import escape
 
+from deface.batch.ray_engine import RayUnavailable
+from deface.batch.resume import SameOutput, SettingsMismatch
+from deface.batch.run import BatchOptions, Interrupted, run_batch
+from deface.batch.task import error_message
 from deface.cli import options
-from deface.export.files import OutputBusy, OutputError, check_writable, claimed_output
-from deface.export.outputs import write_fit
+from deface.export.files import OutputError, check_writable
 from deface.fit.config import FitConfig
-from deface.fit.guard import NonFiniteError
-from deface.fit.log import FitLog, console
-from deface.fit.pipeline import fit
-from deface.io.images import LOAD_MAX_SIDE, InputError, load_image, one_line
+from deface.fit.log import console
+from deface.io.images import InputError
 from deface.io.inputs import InputItem, list_inputs
-from deface.io.video import read_spread_frames
-from deface.landmarks.detect import NoFaceError
 from deface.models.registry import require_face_model
 from deface.paths import ModelFileError
 
-# Failures of one input that are explained by their message (OSError: disk, permissions, missing files).
-EXPECTED_ERRORS = (InputError, NoFaceError, ModelFileError, OutputError, NonFiniteError, ValueError, OSError)
 EXIT_FAILED, EXIT_USAGE = 1, 2
-
-
-class Interrupted(BaseException):
-    """SIGINT or SIGTERM arrived; raised in the main thread so staged outputs are removed on the way out."""
-
-    def __init__(self, signum: int):
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
-@dataclass
-class Tally:
-    """What a run did with its inputs, for the summary line."""
-
-    total: int
-    done: int = 0
-    failed: int = 0
-    busy: int = 0
-
-    @property
-    def remaining(self) -> int:
-        return self.total - self.done - self.failed - self.busy
-
-    def summary(self) -> str:
-        busy = f", {self.busy} left to another run" if self.busy else ""
-        return f"{self.done} of {self.total} input(s) done, {self.failed} failed{busy}"
 
 
 def register(app: typer.Typer) -> None:
@@ -91,6 +55,20 @@ def fit_command(
     quiet: Annotated[bool, typer.Option(help="Only errors and a summary.")] = False,
     verbose: Annotated[bool, typer.Option(help="Print the full details (traceback, tool output) of each error.")]
     = False,
+    jobs: Annotated[int, typer.Option("--jobs", "-j", help="Inputs fitted at once, each in its own worker process "
+                                      "with 1 torch thread (0 = one per core; 1 = one after another in this "
+                                      "process).")] = 0,
+    retry_failed: Annotated[bool, typer.Option("--retry-failed", help="Redo only the inputs whose last record in "
+                                               "OUT/batch.jsonl is a failure (a plain rerun fits every unfinished "
+                                               "input).")] = False,
+    engine: Annotated[str, typer.Option(help="local (this machine) or ray (a Ray cluster; pip install "
+                                             "'deface[ray]').")] = "local",
+    ray_address: Annotated[str | None, typer.Option("--ray-address", help="Ray cluster to join (default: "
+                                                    "RAY_ADDRESS, else a local Ray started for this run).")] = None,
+    ray_outputs: Annotated[str, typer.Option("--ray-outputs", help="driver: tasks return the outputs and this "
+                                             "machine writes them (safe default); shared: tasks write to OUT "
+                                             "directly (OUT and the inputs must be on a filesystem every node "
+                                             "sees).")] = "driver",
 ) -> None:
     """Fit each input and write OUT/<input stem>/ (textures, mesh.obj/.mtl/.glb, params, renders, masks)."""
     try:
@@ -103,6 +81,7 @@ def fit_command(
             threads=threads,
         )
         items = list_inputs(inputs)
+        batch = _batch_options(jobs, engine, ray_address, ray_outputs, overwrite, retry_failed, quiet, verbose)
     except (InputError, ValueError, OSError) as error:
         report_error(error)
         raise typer.Exit(EXIT_USAGE) from None
@@ -112,105 +91,42 @@ def fit_command(
     except (ModelFileError, OutputError) as error:
         report_error(error)
         raise typer.Exit(EXIT_FAILED) from None
-    if run(items, output, config, models, overwrite, quiet, verbose):
+    if run(items, output, config, models, batch=batch):
         raise typer.Exit(EXIT_FAILED)
+
+
+def _batch_options(jobs, engine, ray_address, ray_outputs, overwrite, retry_failed, quiet, verbose) -> BatchOptions:
+    options.check_ranges({"--jobs": jobs})
+    options.check_choice("--engine", engine, ("local", "ray"))
+    options.check_choice("--ray-outputs", ray_outputs, ("driver", "shared"))
+    if engine != "ray" and ray_address:
+        raise options.UsageError("--ray-address needs --engine ray")
+    return BatchOptions(jobs=jobs, overwrite=overwrite, retry_failed=retry_failed, quiet=quiet, verbose=verbose,
+                        engine=engine, ray_address=ray_address, ray_outputs=ray_outputs)
 
 
 def report_error(error: BaseException, verbose: bool = False) -> None:
     """One line on stderr (markup-safe); with ``verbose`` the traceback and chained causes first."""
     if verbose:
         console.print("".join(traceback.format_exception(error)).rstrip(), markup=False)
-    console.print(f"[red]error:[/red] {escape(_message(error))}")
-
-
-def _message(error: BaseException) -> str:
-    if isinstance(error, MemoryError):
-        return "out of memory; try a smaller --resolution or --max-frames"
-    if not isinstance(error, EXPECTED_ERRORS):
-        return f"unexpected {one_line(error)} (a bug: please report it with the output of --verbose)"
-    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
-    if not lines:
-        return one_line(error)
-    return lines[0] if len(lines) == 1 else f"{lines[0]} (more with --verbose)"
+    console.print(f"[red]error:[/red] {escape(error_message(error))}")
 
 
 def run(items: list[InputItem], output: Path, config: FitConfig, models=None, overwrite: bool = False,
-        quiet: bool = False, verbose: bool = False) -> int:
-    """Fit and write every input; returns the number that failed (each failure printed in one line).
+        quiet: bool = False, verbose: bool = False, batch: BatchOptions | None = None) -> int:
+    """Fit and write every input (deface.batch); returns the number that failed (each printed in one line).
 
-    SIGINT / SIGTERM end the current input without partial outputs, print one line and exit 130 / 143.
+    Finished outputs made with other settings, or two inputs with one output name, are a usage error
+    (exit 2); SIGINT / SIGTERM end the run without partial outputs, print one line and exit 130 / 143.
     """
-    tally = Tally(len(items))
-    current = None
+    batch = batch or BatchOptions(jobs=1, overwrite=overwrite, quiet=quiet, verbose=verbose)
     try:
-        with _signals_raise():
-            for current in items:
-                outcome = _fit_one(current, output, config, models, overwrite, quiet, verbose)
-                setattr(tally, outcome, getattr(tally, outcome) + 1)
+        return run_batch(items, output, config, models, batch)
+    except (SettingsMismatch, SameOutput) as error:
+        report_error(error)
+        raise typer.Exit(EXIT_USAGE) from None
+    except RayUnavailable as error:
+        console.print(f"[red]error:[/red] {escape(str(error))}")
+        raise typer.Exit(EXIT_FAILED) from None
     except Interrupted as stop:
-        console.print(f"interrupted ({stop}) during {current.path}: {tally.summary()}, {tally.remaining} not "
-                      f"done; run the same command again to resume (finished inputs are skipped)")
         raise typer.Exit(128 + stop.signum) from None
-    console.print(f"{tally.summary()}; outputs in {output}")
-    return tally.failed
-
-
-@contextmanager
-def _signals_raise() -> Iterator[None]:
-    """Turn SIGINT and SIGTERM into :class:`Interrupted` (main thread only), restoring the handlers after."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {number: signal.getsignal(number) for number in (signal.SIGINT, signal.SIGTERM)}
-
-    def interrupt(signum, _frame):
-        raise Interrupted(signum)
-
-    for number in previous:
-        signal.signal(number, interrupt)
-    try:
-        yield
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
-
-
-def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], list[int]]:
-    """sRGB frames of an input and their indices in the source (a photo is frame 0)."""
-    if item.kind == "image":
-        return [load_image(item.path, max_side=LOAD_MAX_SIDE)], [0]
-    return read_spread_frames(item.path, config.max_frames, config.frame_stride, max_side=LOAD_MAX_SIDE)
-
-
-def _fit_one(item: InputItem, output: Path, config: FitConfig, models, overwrite: bool, quiet: bool,
-             verbose: bool) -> str:
-    """Fit one input under its output folder's lock -> "done", "failed" or "busy" (another run has it)."""
-    folder = output / item.name
-    try:
-        with claimed_output(folder):
-            if (folder / "params.json").exists() and not overwrite:
-                console.print(f"{item.path}: already done in {folder} (use --overwrite to redo)")
-                return "done"
-            _fit_and_write(item, folder, config, models, quiet)
-    except OutputBusy as busy:
-        console.print(escape(str(busy)))
-        return "busy"
-    except Exception as error:  # noqa: BLE001 - every failure of one input is one line; the batch goes on
-        report_error(error, verbose)
-        return "failed"
-    return "done"
-
-
-def _fit_and_write(item: InputItem, folder: Path, config: FitConfig, models, quiet: bool) -> None:
-    started = time.perf_counter()
-    frames, indices = load_frames(item, config)
-    log = FitLog(name=item.name, quiet=quiet)
-    result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log)
-    record = {"path": str(item.path), "kind": item.kind, "frames": indices,
-              "size": [int(frames[0].shape[1]), int(frames[0].shape[0])]}
-    try:
-        write_fit(result, folder, record)
-    except OSError as error:
-        raise OutputError(f"{folder}: cannot write ({error.strerror or one_line(error)}); what was there "
-                          "before is unchanged") from error
-    console.print(f"{item.path}: done in {time.perf_counter() - started:.1f} s -> {folder}")

@@ -54,6 +54,7 @@ RANGES = {
     "--face-index": Range(0, 63, "a face number (0 = largest)"),
     "--threads": Range(0, 256, "a number of torch threads (0 = torch's default)"),
     "--seed": Range(0, 2**32 - 1, "a seed"),
+    "--jobs": Range(0, 256, "a number of worker processes (0 = one per core)"),
 }
 ITERATIONS = Range(1, 100_000, "a step count")
 FACE_MODELS = ("ict", "bfm")
@@ -76,6 +77,11 @@ def parse_iterations(text: str) -> tuple[int, int, int]:
     for value in values:
         ITERATIONS.check("--iterations (each of S1,S2,S3)", value)
     return values
+
+
+def check_choice(option: str, value: str, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise UsageError(f"{option} must be one of {', '.join(choices)}, got '{value}'")
 
 
 def check_face_model(name: str) -> None:

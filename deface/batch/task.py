@@ -1,0 +1,111 @@
+"""One input of a batch, the same in every engine (this process, local workers, Ray tasks): claim the output
+folder, skip it when finished, load, fit, write -> :class:`Outcome`. Expected failures of one input become
+a one-line message; only an interrupt (a ``BaseException``) passes through, leaving nothing half-written.
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from deface.export.files import OutputBusy, OutputError, claimed_output
+from deface.export.outputs import write_fit
+from deface.fit.config import FitConfig
+from deface.fit.guard import NonFiniteError
+from deface.fit.log import FitLog
+from deface.fit.pipeline import fit
+from deface.io.images import LOAD_MAX_SIDE, InputError, load_image, one_line
+from deface.io.inputs import InputItem
+from deface.io.video import read_spread_frames
+from deface.landmarks.detect import NoFaceError
+from deface.paths import ModelFileError
+
+# Failures of one input that are explained by their message (OSError: disk, permissions, missing files).
+EXPECTED_ERRORS = (InputError, NoFaceError, ModelFileError, OutputError, NonFiniteError, ValueError, OSError)
+
+
+@dataclass(frozen=True)
+class Job:
+    """Everything a worker needs to fit one input (picklable)."""
+
+    item: InputItem
+    output: Path  # OUT; the input's folder is OUT/<item.name>
+    config: FitConfig
+    models: Path | None = None
+    overwrite: bool = False
+
+    @property
+    def folder(self) -> Path:
+        return self.output / self.item.name
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What became of one input."""
+
+    status: str  # "done", "failed", "skipped" (already finished) or "busy" (another run holds it)
+    seconds: float
+    lights_kept: tuple[int, ...] | None = None
+    error: str | None = None  # one line (failed, busy)
+    cpu_seconds: float | None = None  # CPU time of the process (all its threads) during this input
+    detail: str | None = None  # traceback of a failure, for --verbose
+
+
+def error_message(error: BaseException) -> str:
+    """One line for a failure: the first line of an expected error's message, else a bug report request."""
+    if isinstance(error, MemoryError):
+        return "out of memory; try a smaller --resolution or --max-frames"
+    if not isinstance(error, EXPECTED_ERRORS):
+        return f"unexpected {one_line(error)} (a bug: please report it with the output of --verbose)"
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    if not lines:
+        return one_line(error)
+    return lines[0] if len(lines) == 1 else f"{lines[0]} (more with --verbose)"
+
+
+def finished_params(folder: Path) -> Path | None:
+    """``folder/params.json`` when the input's output is complete (it appears by one rename), else None."""
+    params = folder / "params.json"
+    return params if params.is_file() else None
+
+
+def run_job(job: Job, log: FitLog) -> Outcome:
+    """Fit one input under its output folder's lock; expected and unexpected failures -> "failed"."""
+    started, cpu = time.perf_counter(), time.process_time()
+    try:
+        with claimed_output(job.folder):
+            if finished_params(job.folder) and not job.overwrite:
+                return Outcome("skipped", 0.0)
+            kept = fit_and_write(job.item, job.folder, job.config, job.models, log)
+    except OutputBusy as busy:
+        return Outcome("busy", 0.0, error=str(busy))
+    except Exception as error:  # noqa: BLE001 - every failure of one input is one line; the batch goes on
+        return Outcome("failed", time.perf_counter() - started, error=error_message(error),
+                       detail="".join(traceback.format_exception(error)).rstrip(),
+                       cpu_seconds=time.process_time() - cpu)
+    return Outcome("done", time.perf_counter() - started, lights_kept=kept, cpu_seconds=time.process_time() - cpu)
+
+
+def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], list[int]]:
+    """sRGB frames of an input and their indices in the source (a photo is frame 0)."""
+    if item.kind == "image":
+        return [load_image(item.path, max_side=LOAD_MAX_SIDE)], [0]
+    return read_spread_frames(item.path, config.max_frames, config.frame_stride, max_side=LOAD_MAX_SIDE)
+
+
+def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models, log: FitLog) -> tuple[int, ...]:
+    """Fit ``item`` and write its outputs atomically into ``folder`` -> the kept lights' indices."""
+    frames, indices = load_frames(item, config)
+    result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log)
+    record = {"path": str(item.path), "kind": item.kind, "frames": indices,
+              "size": [int(frames[0].shape[1]), int(frames[0].shape[0])]}
+    try:
+        write_fit(result, folder, record)
+    except OSError as error:
+        raise OutputError(f"{folder}: cannot write ({error.strerror or one_line(error)}); what was there "
+                          "before is unchanged") from error
+    return tuple(int(k) for k in result.context.decoupling.kept)
