@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import torch
 
+from deface.fit import fast_stage3
 from deface.fit.guard import StepGuard
 from deface.fit.stage2 import FrameRender, StageContext
 from deface.losses import decouple as decouple_losses
@@ -87,10 +88,11 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
 def objective(context: StageContext, frozen: list[FrozenFrame], initial: Textures, human_prior=None):
     """The stage-3 loss as a function of the textures; its texture-space constants are computed once."""
     palette, uv_mask = _palette(context, initial), _uv_mask(context, initial)
+    texture_terms = _texture_terms_of(context, initial, palette, uv_mask)
 
     def loss_of(textures: Textures) -> torch.Tensor:
         loss = sum(_frame_loss(context, f, textures, human_prior) for f in frozen) / len(frozen)
-        return loss + _texture_terms(context, textures, initial, palette, uv_mask) + context.scene_light_prior()
+        return loss + texture_terms(textures) + context.scene_light_prior()
 
     return loss_of
 
@@ -174,9 +176,12 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, h
 
 def _local_prior(output, reference: dict, coverage: torch.Tensor) -> torch.Tensor:
     """The authors' weighting: 5 x diffuse + 6 x specular + 1 x roughness, on screen-space albedo."""
-    return (5.0 * local_prior(output.diffuse, reference["diffuse"], coverage)
-            + 6.0 * local_prior(output.specular, reference["specular"], coverage)
-            + local_prior(output.roughness, reference["roughness"], coverage))
+    prior = local_prior
+    if fast_stage3.enabled(output.diffuse, reference["diffuse"], coverage):
+        prior = fast_stage3.local_prior_l1  # the same LP (5x5, L1), fused with its gradient
+    return (5.0 * prior(output.diffuse, reference["diffuse"], coverage)
+            + 6.0 * prior(output.specular, reference["specular"], coverage)
+            + prior(output.roughness, reference["roughness"], coverage))
 
 
 def _palette(context: StageContext, initial: Textures):
@@ -191,6 +196,16 @@ def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:
     mask = torch.as_tensor(context.model.albedo.face_mask, dtype=torch.float32)
     size = initial.diffuse.shape[0]
     return torch.nn.functional.interpolate(mask[None, None], size=(size, size), mode="bilinear")[0, 0]
+
+
+def _texture_terms_of(context: StageContext, initial: Textures, palette, uv_mask):
+    """textures -> the texture-space terms: the fused kernels (deface/fit/fast_stage3.py) on the CPU, else
+    the torch reference :func:`_texture_terms`."""
+    weights = context.config.weights
+    if fast_stage3.enabled(initial.diffuse, initial.specular, initial.roughness, uv_mask):
+        return fast_stage3.TextureTerms(initial, uv_mask, palette, weights.texture_regulariser,
+                                        weights.global_prior)
+    return lambda textures: _texture_terms(context, textures, initial, palette, uv_mask)
 
 
 def _texture_terms(context: StageContext, textures: Textures, initial: Textures, palette, uv_mask) -> torch.Tensor:
