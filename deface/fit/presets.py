@@ -19,6 +19,7 @@
   what a cast shadow needs; more lights split the lit skin); and 4 octaves of sin/cos features
   on f's input, without which the authors' small MLP on raw (x, y) cannot draw the sharp, thin edges of
   blinds, fingers and leaves and the shadow is baked into the texture. ``paper`` keeps the paper's values.
+  Stage 3 stops early once its loss has settled (``Iterations.stage3_tolerance``).
 - ``deface-tone``: ``deface`` that keeps the person's skin tone (``tone``): the albedo's tone is free along a
   flat-prior tone axis and the lights are held to the scene's illuminant (docs/skin-tone.md). Without it
   the lights absorb every skin's tone and all textures come out alike (slope 0.08 vs 0.81 on the skin-tone
@@ -77,11 +78,17 @@ def _nextface(name: str, restrict_to_face: bool) -> FitConfig:
 FOURIER_OCTAVES = 4
 
 
+# Stage 3's early stop in `deface` and `fast`: less than 0.5 % loss decrease per 20 steps (Iterations; on a
+# 256² photo the last ~80 of 200 steps lowered the loss ~1 % in all; BENCHMARKS.md "Speed").
+STAGE3_TOLERANCE = 0.005
+
+
 def _deface() -> FitConfig:
     return FitConfig(
         preset="deface",
         lights=LightConfig(num_lights=3),
         decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES),
+        iterations=Iterations(stage3_tolerance=STAGE3_TOLERANCE),
     )
 
 
@@ -91,7 +98,8 @@ def _deface_tone() -> FitConfig:
 
 def _fast() -> FitConfig:
     return override(_deface(), preset="fast", resolution=192, texture_size=256, shadow_rays=64,
-                    iterations=Iterations(stage1=150, stage2=150, stage3=60), **{"decouple.ace_iteration": 50})
+                    iterations=Iterations(stage1=150, stage2=150, stage3=60, stage3_tolerance=STAGE3_TOLERANCE),
+                    **{"decouple.ace_iteration": 50})
 
 
 PRESETS = {

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import torch
 
 from deface.fit import fast_stage3
+from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
 from deface.fit.stage2 import FrameRender, StageContext
 from deface.losses import decouple as decouple_losses
@@ -71,8 +72,8 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
     guard = StepGuard(optimiser, "stage 3", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
     loss_of = objective(context, frozen, initial, human_prior)
-    history = []
-    for step in range(context.config.iterations.stage3):
+    history, iterations = [], context.config.iterations
+    for step in range(iterations.stage3):
         optimiser.zero_grad(set_to_none=True)
         loss = loss_of(parameters.textures())
         loss.backward()
@@ -80,7 +81,12 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
         guard.check(loss)
         value = float(loss.detach())
         history.append(value)
-        context.log.step("stage 3", step, context.config.iterations.stage3, value)
+        context.log.step("stage 3", step, iterations.stage3, value)
+        if step + 1 < iterations.stage3 and converged(history, iterations.convergence_window,
+                                                      iterations.stage3_tolerance):
+            context.log.info(f"stage 3 converged after {step + 1} of {iterations.stage3} steps "
+                             f"(tolerance {iterations.stage3_tolerance} per {iterations.convergence_window} steps)")
+            break
     with torch.no_grad():
         return Stage3Result(parameters.textures(), initial, frozen, history)
 
