@@ -92,3 +92,20 @@ def test_switch_follows_the_renderer_kernels():
     assert not fast_stage3.enabled(tensor, tensor.double())  # one dtype only
     with kernels.backend("torch"):
         assert not fast_stage3.enabled(tensor)
+
+
+@pytest.mark.parametrize("factor", [2, 3])
+def test_block_mean_matches_avg_pool(factor):
+    from deface.render import fast_box, supersample
+
+    generator = torch.Generator().manual_seed(10)
+    values = torch.rand(2, 4 * factor, 5 * factor, 3, generator=generator, dtype=torch.float64)
+    fast_input, reference_input = values.clone().requires_grad_(), values.clone().requires_grad_()
+    weights = torch.rand(2, 4, 5, 3, generator=generator, dtype=torch.float64)
+    fast = fast_box.block_mean(fast_input, factor)
+    with kernels.backend("torch"):
+        reference = supersample._pool(reference_input, factor)
+    torch.testing.assert_close(fast, reference, rtol=1e-14, atol=0)
+    (fast_grad,) = torch.autograd.grad((fast * weights).sum(), fast_input)
+    (reference_grad,) = torch.autograd.grad((reference * weights).sum(), reference_input)
+    torch.testing.assert_close(fast_grad, reference_grad, rtol=1e-14, atol=0)
