@@ -19,12 +19,14 @@ from deface.eval import identity
 from deface.eval.metrics import composite, mean_scores, score_images
 from deface.eval.pairs import Pair
 from deface.eval.report import PairScores, ReportRow
+from deface.eval.uv_measure import SEEN, both_seen, detail_ratio, speckle, uv_consistency
 from deface.export.files import save_png
 from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
 from deface.fit.pipeline import FitResult, fit
 from deface.io.images import linear_to_srgb, load_image
 from deface.models.ita import texture_ita
+from deface.texture.confidence import unwrap
 
 
 @dataclass(frozen=True)
@@ -33,6 +35,7 @@ class PairOutcome:
     row: ReportRow
     seconds_per_fit: float
     albedo_ita: dict  # {"source": ITA, "target": ITA} of the two fits' diffuse textures (same person)
+    uv: dict  # UV-space measures (deface/eval/uv_measure.py): consistency, speckle, texels compared
 
 
 def fit_side(paths: list[Path], config: FitConfig, models_dir, name: str, quiet: bool) -> FitResult:
@@ -80,7 +83,27 @@ def evaluate_pair(pair: Pair, config: FitConfig, folder: Path, models_dir=None, 
     images = _save_images(folder, source, target, source_outputs[0], swap_outputs[0])
     scores = PairScores(pair.name, source_scores, swap_scores)
     row = ReportRow(pair.name, images, {"source": source_scores, "target": swap_scores})
-    return PairOutcome(scores, row, seconds, {"source": _albedo_ita(source), "target": _albedo_ita(target)})
+    return PairOutcome(scores, row, seconds, {"source": _albedo_ita(source), "target": _albedo_ita(target)},
+                       uv_scores(source, target))
+
+
+def uv_scores(source: FitResult, target: FitResult) -> dict:
+    """The two fits' diffuse maps compared in UV space, and their speckle (mean of both fits)."""
+    region = both_seen(source.seen, target.seen)
+    srgb = [linear_to_srgb(_np(fit.textures.diffuse).clip(0, 1)) for fit in (source, target)]
+    details = [fit_detail(fit) for fit in (source, target)]
+    return {"consistency": uv_consistency(*srgb, region), "texels": int(region.sum()),
+            "speckle": float(np.mean([d["speckle"] for d in details])),
+            "detail": float(np.mean([d["detail"] for d in details]))}
+
+
+def fit_detail(result: FitResult) -> dict[str, float]:
+    """Speckle and detail ratio of a fit's diffuse map against its first frame read in UV, over the texels
+    that frame saw (deface/eval/uv_measure.py)."""
+    view = result.views[0]
+    region = view.seen(_np(result.render()[0].face_region)) >= SEEN
+    photo, diffuse = unwrap(result.context.target.images[0].numpy(), view), _np(result.textures.diffuse)
+    return {"speckle": speckle(diffuse, photo, region), "detail": detail_ratio(diffuse, photo, region)}
 
 
 def _albedo_ita(result: FitResult) -> float:
@@ -95,6 +118,7 @@ def _save_images(folder: Path, source: FitResult, target: FitResult, source_out,
         "source reconstruction": (source_out, True),
         "target synthesis": (swap_out, True),
         "diffuse (source)": (_np(source.textures.diffuse), True),
+        "diffuse (target)": (_np(target.textures.diffuse), True),
         "specular (source)": (_np(source.textures.specular), False),
         "roughness (source)": (_np(source.textures.roughness), False),
     }

@@ -2,6 +2,8 @@
 
 textures/{diffuse,specular,roughness}.png  UV maps. diffuse: sRGB-encoded base colour (what viewers expect);
                                            specular, roughness: linear data (Blender: "Non-Color").
+textures/confidence.png                    how well the photo(s) constrain each texel, linear grey in [0, 1]
+                                           (docs/textures.md)
 mesh.obj + mesh.mtl, mesh.glb              fitted mesh (cm; GLB in metres), a photo's expression; for a clip
                                            the identity with a neutral expression
 params.json, params.npz                    named parameters and the run record; large arrays in the npz
@@ -42,6 +44,8 @@ def _write_textures(result, folder: Path) -> None:
     save_png(folder / TEXTURE_FILES["diffuse"], _np(textures.diffuse), srgb=True)
     save_png(folder / TEXTURE_FILES["specular"], _np(textures.specular), srgb=False)
     save_png(folder / TEXTURE_FILES["roughness"], _np(textures.roughness), srgb=False)
+    if result.confidence is not None:
+        save_png(folder / "textures" / "confidence.png", result.confidence[..., None], srgb=False)
 
 
 def _export_vertices(result) -> np.ndarray:
@@ -118,6 +122,7 @@ def _write_params(result, renders: list, folder: Path, record: dict) -> None:
         roughness=_np(result.textures.roughness).astype(np.float16),
         light_masks=np.stack([_np(r.light_masks) for r in renders]).astype(np.float16),
         face_region=np.stack([_np(r.face_region) for r in renders]).astype(np.float16),
+        **({"confidence": result.confidence.astype(np.float16)} if result.confidence is not None else {}),
         landmarks_2d=np.stack([lm.points for lm in target.landmarks]),
     )
 

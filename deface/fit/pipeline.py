@@ -19,6 +19,7 @@ from deface.fit.stage1 import Stage1Config, fit_landmarks
 from deface.fit.stage2 import FrameRender, StageContext, run_stage2
 from deface.fit.stage3 import FrozenFrame, relight_frozen, render_frozen, run_stage3
 from deface.fit.target import FitTarget, scale_landmarks, working_frames
+from deface.fit.texels import complete_textures, seen_texels, texture_confidence
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.registry import load_face_model
@@ -38,6 +39,9 @@ class FitResult:
     initial_textures: Textures  # T^0 from the albedo model
     log: FitLog
     optional_networks: dict  # name -> "used" or the reason it was not
+    confidence: np.ndarray | None = None  # [Ht, Wt] how well the frames constrain each texel (deface/fit/texels.py)
+    seen: np.ndarray | None = None  # [Ht, Wt] visible x h x facing, best frame (what completion went by)
+    views: list | None = None  # per frame TexelView: where each texel lands and how it is seen
 
     def render(self, textures: Textures | None = None) -> list[FrameRender]:
         """Per-frame renders with the fit's geometry, lights and M_o, using ``textures`` (default: own)."""
@@ -124,7 +128,20 @@ def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | 
     log.start("stage 3")
     stage3 = run_stage3(context, human_prior)
     log.stop("stage 3")
-    return FitResult(context, stage3.frozen, stage3.textures, stage3.initial, log, optional)
+    result = FitResult(context, stage3.frozen, stage3.textures, stage3.initial, log, optional, views=stage3.views)
+    return _finish_textures(result, config, log)
+
+
+def _finish_textures(result: FitResult, config: FitConfig, log: FitLog) -> FitResult:
+    """Complete the texels no frame showed, and measure how well the frames constrain each texel."""
+    log.start("textures")
+    result.seen = seen_texels(result.views, [rendered.face_region for rendered in result.render()])
+    if config.completion.enabled:
+        result.textures = complete_textures(result.context.model, result.textures, result.initial_textures,
+                                            result.seen, config.completion)
+    result.confidence = texture_confidence(result.views, result.render())
+    log.stop("textures")
+    return result
 
 
 def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog, models_dir=None) -> StageContext:

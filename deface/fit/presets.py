@@ -43,6 +43,8 @@ from deface.fit.config import (
     Weights,
     override,
 )
+from deface.texture.completion import CompletionConfig
+from deface.texture.pyramid import PyramidConfig
 
 # Chosen by the evaluation benchmark (BENCHMARKS.md records the comparison).
 DEFAULT_PRESET = "deface"
@@ -82,6 +84,9 @@ FOURIER_OCTAVES = 4
 # 256² photo the last ~80 of 200 steps lowered the loss ~1 % in all; BENCHMARKS.md "Speed").
 STAGE3_TOLERANCE = 0.005
 
+# Levels of the stage-3 texture pyramid in the default preset (deface/texture/pyramid.py, BENCHMARKS.md).
+TEXTURE_LEVELS = 5
+
 
 def _deface() -> FitConfig:
     return FitConfig(
@@ -89,6 +94,8 @@ def _deface() -> FitConfig:
         lights=LightConfig(num_lights=3),
         decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES),
         iterations=Iterations(stage3_tolerance=STAGE3_TOLERANCE),
+        texture_pyramid=PyramidConfig(levels=TEXTURE_LEVELS),
+        completion=CompletionConfig(enabled=True),
     )
 
 
