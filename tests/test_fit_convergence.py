@@ -29,7 +29,7 @@ def test_stages_stop_early_and_say_so(shadowed_small):
     config = override(presets.get("default"), **{
         "iterations.stage1": 20, "iterations.stage2": 40, "iterations.stage3": 30, "decouple.ace_iteration": 6,
         "iterations.stage2_tolerance": 10.0, "iterations.stage3_tolerance": 10.0,
-        "iterations.convergence_window": 3, "resolution": 64, "texture_size": 64, "shadow_rays": 16})
+        "iterations.convergence_window": 3, "resolution": 64, "texture_size": 64, "render.shadow_rays": 16})
     log = FitLog(quiet=True)
     fit_target(FitTarget([image], [landmarks], scale), config, log=log)
     # any loss change is below a tolerance of 10: each stage stops as soon as it may test (2 windows)

@@ -17,6 +17,7 @@ from deface.fit.convergence import converged
 from deface.fit.decoupling import Decoupling
 from deface.fit.guard import StepGuard
 from deface.fit.scene import SceneParameters, frame_geometry
+from deface.fit.scene_light import restart_tone_in_key_light
 from deface.fit.target import FitTarget
 from deface.io.images import LUMINANCE
 from deface.losses import decouple as decouple_losses
@@ -30,8 +31,6 @@ from deface.losses.photometric import photometric_loss
 from deface.priors.illuminant import IlluminantEstimate
 from deface.render.mesh import Textures
 from deface.render.renderer import Renderer, ShadowTransferCache
-
-STAGE2_TEXTURE_SIZE = 128  # the albedo model's native resolution: stage 2's textures are smooth by design
 
 
 @dataclass
@@ -63,8 +62,10 @@ class StageContext:
     def geometry(self, frame: int):
         return frame_geometry(self.model, self.scene, self.topology, frame, self.target.size)
 
-    def albedo_textures(self, size: int = STAGE2_TEXTURE_SIZE) -> Textures:
-        """The albedo model's maps at the fitted coefficients (and tone, when the tone is free)."""
+    def albedo_textures(self, size: int | None = None) -> Textures:
+        """The albedo model's maps at the fitted coefficients (and tone, when the tone is free), ``size``
+        texels square (default: ``config.stage2_texture_size``)."""
+        size = size or self.config.stage2_texture_size
         ita = self.scene.tone if self.config.tone.free_tone else None
         diffuse, specular = self.model.albedo.textures(self.scene.albedo, size, ita)
         roughness = torch.full((*diffuse.shape[:2], 1), self.model.albedo.roughness_default)
@@ -107,14 +108,14 @@ class StageContext:
         return FrameRender(light_images, coverage, light_masks, face_region, face, probability, normals)
 
     def _transfer(self, frame: int, mesh, refresh: bool):
-        if not self.config.shadows:
+        if not self.config.render.shadows:
             return None
         cache = self.shadow_caches[frame]
         return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
 
     def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
         return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
-                                rendered.coverage, blur=self.config.render_blur,
+                                rendered.coverage, blur=self.config.render.render_blur,
                                 form=self.config.decouple.loss_form)
 
 
@@ -128,8 +129,9 @@ def run_stage2(context: StageContext) -> list[float]:
     for step in range(config.iterations.stage2):
         if step == ace_at and decoupling.light_field is not None:
             _apply_ace(context)
+            restart_tone_in_key_light(context)
         optimiser.zero_grad(set_to_none=True)
-        refresh = step % config.shadow_refresh_every == 0
+        refresh = step % config.render.shadow_refresh_every == 0
         loss = _stage2_loss(context, before_ace=step < ace_at, refresh_shadows=refresh)
         loss.backward()
         optimiser.step()

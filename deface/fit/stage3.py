@@ -34,7 +34,7 @@ class FrozenFrame:
 
     index: int  # frame number
     geometry: object  # posed mesh and the working-resolution camera
-    camera: object  # the camera the fragments were cast with (config.supersampling x finer)
+    camera: object  # the camera the fragments were cast with (config.render.supersampling x finer)
     fragments: object
     transfer: object
     face_region: torch.Tensor  # [H, W] M_o from stage 2
@@ -59,7 +59,7 @@ def texture_gates(context: StageContext, views: list[TexelView], size: int) -> l
     """The pyramid's gates from the frames' texel density (pixels per texel, summed over frames)."""
     config = context.config.texture_pyramid
     density = np.sum([view.density for view in views], axis=0)
-    return level_gates(density, level_sizes(size, config), config.gated)
+    return level_gates(density, level_sizes(size, config), config.gated, config.gate_power)
 
 
 def initial_textures(context: StageContext) -> Textures:
@@ -138,9 +138,9 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
             geometry.camera.focal.detach(), geometry.camera.rotation.detach(),
             geometry.camera.translation.detach(), geometry.camera.width, geometry.camera.height),
     )
-    camera = supersampled_camera(geometry.camera, context.config.supersampling)
+    camera = supersampled_camera(geometry.camera, context.config.render.supersampling)
     fragments = context.renderer.rasterize(geometry.mesh, camera)
-    transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.shadows else None
+    transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.render.shadows else None
     output = _shade(context, geometry.mesh, camera, fragments, initial, transfer)
     coverage = output.mask
     face_region = context.decoupling.face_region(frame, coverage, context.target.face_classifier[frame])
@@ -152,7 +152,7 @@ def _shade(context: StageContext, mesh, camera, fragments, textures: Textures, t
     """Shade under ``lights`` [K, B*B, 3] (default: the kept lights), box-filtered to the working resolution."""
     lights = context.scene.lights[context.decoupling.kept] if lights is None else lights
     output = context.renderer.shade(mesh, camera, fragments, textures, lights, transfer)
-    return box_filter(output, context.config.supersampling)
+    return box_filter(output, context.config.render.supersampling)
 
 
 def relight_frozen(context: StageContext, frame: FrozenFrame, textures: Textures, lights: torch.Tensor):
@@ -188,28 +188,30 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, h
         loss = loss + weights.binary * decouple_losses.binary_loss(rendered.light_masks, rendered.coverage,
                                                                    form=form)
     if priors.local_prior:
-        loss = loss + weights.local_prior * _local_prior(output, frame.reference, rendered.coverage)
+        loss = loss + weights.local_prior * _local_prior(output, frame.reference, rendered.coverage,
+                                                         priors.local_prior_weights)
     if priors.human_prior and human_prior is not None:
         loss = loss + weights.human_prior * human_prior(rendered.light_images, rendered.coverage)
     return loss
 
 
-def _local_prior(output, reference: dict, coverage: torch.Tensor) -> torch.Tensor:
-    """The authors' weighting: 5 x diffuse + 6 x specular + 1 x roughness, on screen-space albedo."""
+def _local_prior(output, reference: dict, coverage: torch.Tensor, weights: tuple[float, float, float]) -> torch.Tensor:
+    """LP on screen-space albedo, ``weights`` x (diffuse, specular, roughness) (the authors' 5 / 6 / 1)."""
+    diffuse, specular, roughness = weights
     prior = local_prior
     if fast_stage3.enabled(output.diffuse, reference["diffuse"], coverage):
         prior = fast_stage3.local_prior_l1  # the same LP (5x5, L1), fused with its gradient
-    return (5.0 * prior(output.diffuse, reference["diffuse"], coverage)
-            + 6.0 * prior(output.specular, reference["specular"], coverage)
-            + prior(output.roughness, reference["roughness"], coverage))
+    return (diffuse * prior(output.diffuse, reference["diffuse"], coverage)
+            + specular * prior(output.specular, reference["specular"], coverage)
+            + roughness * prior(output.roughness, reference["roughness"], coverage))
 
 
 def _palette(context: StageContext, initial: Textures):
-    if not context.config.priors.global_prior:
+    priors = context.config.priors
+    if not priors.global_prior:
         return None
-    # 8k texels and 3 restarts: the palette of a smooth T^0 is stable well below sklearn's defaults.
-    return kmeans_palette(initial.diffuse, _uv_mask(context, initial), k=context.config.priors.palette_size,
-                          seed=context.config.seed, max_samples=8000, n_init=3)
+    return kmeans_palette(initial.diffuse, _uv_mask(context, initial), k=priors.palette_size,
+                          seed=context.config.seed, max_samples=priors.palette_samples, n_init=priors.palette_restarts)
 
 
 def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:
