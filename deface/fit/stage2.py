@@ -17,7 +17,6 @@ from deface.fit.convergence import converged
 from deface.fit.decoupling import Decoupling
 from deface.fit.guard import StepGuard
 from deface.fit.scene import SceneParameters, frame_geometry
-from deface.fit.scene_light import restart_tone_in_key_light
 from deface.fit.target import FitTarget
 from deface.io.images import LUMINANCE
 from deface.losses import decouple as decouple_losses
@@ -129,7 +128,6 @@ def run_stage2(context: StageContext) -> list[float]:
     for step in range(config.iterations.stage2):
         if step == ace_at and decoupling.light_field is not None:
             _apply_ace(context)
-            restart_tone_in_key_light(context)
         optimiser.zero_grad(set_to_none=True)
         refresh = step % config.render.shadow_refresh_every == 0
         loss = _stage2_loss(context, before_ace=step < ace_at, refresh_shadows=refresh)
