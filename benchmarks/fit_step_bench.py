@@ -1,11 +1,12 @@
 """Time one stage-2 or stage-3 step (render K lights + f (+ g) + losses + backward) of a real photo fit.
 
     DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/fit_step_bench.py [PHOTO] [--resolution 256]
-        [--stage 2|3] [--supersampling S] [--threads 1]
+        [--stage 2|3] [--supersampling S] [--threads 1] [--reference-terms]
 
 Prints the median wall and thread-CPU time of a step at the default preset with 1 torch thread (the
 default of `deface fit`; --threads as `deface fit --threads`): stage 2 before ACE (all n lights); stage 3
-with all n lights kept (an upper bound: ACE usually keeps fewer) at `--supersampling` samples per pixel side.
+with all n lights kept (an upper bound: ACE usually keeps fewer) at `--supersampling` samples per pixel side;
+`--reference-terms`: stage 3 with the torch references of the fused terms (deface/fit/fast_stage3.py).
 """
 
 from __future__ import annotations
@@ -13,10 +14,12 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from contextlib import nullcontext
+from unittest import mock
 
 import torch
 
-from deface.fit import pipeline, presets, stage3
+from deface.fit import fast_stage3, pipeline, presets, stage3
 from deface.fit.config import override
 from deface.fit.log import FitLog
 from deface.fit.stage2 import _stage2_loss
@@ -35,6 +38,8 @@ def main() -> None:
     parser.add_argument("--stage", type=int, choices=(2, 3), default=2)
     parser.add_argument("--supersampling", type=int, default=None, help="stage 3 (default: the preset's)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads (as `deface fit --threads`)")
+    parser.add_argument("--reference-terms", action="store_true",
+                        help="stage 3: torch reference terms instead of the fused kernels")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     config = override(presets.get("default"), resolution=args.resolution)
@@ -45,7 +50,7 @@ def main() -> None:
     context = pipeline._stage1(load_face_model("ict"), FitTarget(work, landmarks, scale), config, log)
     pipeline._face_classifier(context, config, None, log)
     _stage2_loss(context, True, True).backward()  # shadow transfer and caches
-    step = _stage2_step(context) if args.stage == 2 else _stage3_step(context)
+    step = _stage2_step(context) if args.stage == 2 else _stage3_step(context, args.reference_terms)
     walls, cpus = [], []
     for _ in range(args.repeats):
         wall, cpu = time.perf_counter(), time.thread_time()
@@ -62,11 +67,23 @@ def _stage2_step(context):
     return lambda: _stage2_loss(context, True, False).backward()
 
 
-def _stage3_step(context):
+def _stage3_step(context, reference_terms: bool = False):
     initial = stage3.initial_textures(context)
-    parameters = stage3.TextureParameters(initial)
-    loss_of = stage3.objective(context, stage3.freeze_frames(context, initial), initial)
-    return lambda: loss_of(parameters.textures()).backward()
+    frozen = stage3.freeze_frames(context, initial)
+    views = stage3.frame_views(context.model, frozen, initial.diffuse.shape[0])
+    parameters = stage3.TextureParameters(initial, stage3.texture_gates(context, views, initial.diffuse.shape[0]))
+
+    def switch():  # the fast path decides at objective construction (texture terms) and per step (LP)
+        return mock.patch.object(fast_stage3, "enabled", lambda *tensors: False) if reference_terms else nullcontext()
+
+    with switch():
+        loss_of = stage3.objective(context, frozen, initial)
+
+    def step():
+        with switch():
+            loss_of(parameters.textures()).backward()
+
+    return step
 
 
 if __name__ == "__main__":

@@ -85,6 +85,7 @@ def test_fit_command_writes_all_outputs(photos, tmp_path):
     kept = params["lights"]["kept"]
     assert kept and set(params["lights"]["sh"]) == {str(k) for k in kept}
     assert params["preset"] == "fast" and params["optional_networks"]["facenet"].startswith("HP off")
+    assert params["iterations_run"] == {"stage 2": 12, "stage 3": 4}
     expected = ["textures/diffuse.png", "textures/specular.png", "textures/roughness.png",
                 "textures/confidence.png", "mesh.obj", "mesh.mtl",
                 "mesh.glb", "params.npz", "render.png", "render_face.png", "masks/face.png", "loss_log.csv"]

@@ -17,7 +17,8 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
     changed = {key: deface[key] for key in paper if paper[key] != deface[key]}
     assert changed == {"preset": "deface", "decouple.face_region": False, "decouple.epsilon": 0.09,
                        "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES,
-                       "texture_pyramid.levels": presets.TEXTURE_LEVELS, "completion.enabled": True}
+                       "texture_pyramid.levels": presets.TEXTURE_LEVELS, "completion.enabled": True,
+                       "iterations.stage3_tolerance": presets.STAGE3_TOLERANCE}
 
 
 def test_deface_tone_is_deface_with_the_skin_tone_work():

@@ -107,6 +107,7 @@ def _write_params(result, renders: list, folder: Path, record: dict) -> None:
         "seed": config.seed,
         "optional_networks": result.optional_networks,
         "seconds_per_stage": result.log.seconds,
+        "iterations_run": {stage: len(losses) for stage, losses in result.log.losses.items()},
         "notes": result.log.notes,
         "versions": {"deface": deface.__version__, "torch": torch.__version__, "numpy": np.__version__,
                      "python": platform.python_version()},

@@ -103,6 +103,14 @@ class Iterations:
     """Statistical fit with light decoupling (iter_2)."""
     stage3: int = 200
     """Per-texel refinement (iter_3)."""
+    stage2_tolerance: float = 0.0
+    """Stage 2 stops before `stage2` steps once converged (deface/fit/convergence.py): when its mean loss over
+    the last `convergence_window` steps fell by less than this fraction of the mean over the window before
+    (tested from ACE + 2 windows on). 0 = always run `stage2` steps."""
+    stage3_tolerance: float = 0.0
+    """The same early stop for stage 3 (tested from 2 windows on). 0 = always run `stage3` steps."""
+    convergence_window: int = 20
+    """Steps per window of the early stops (window means smooth Adam's step-to-step noise)."""
 
 
 @dataclass(frozen=True)

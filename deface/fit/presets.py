@@ -21,6 +21,7 @@
   blinds, fingers and leaves and the shadow is baked into the texture. ``paper`` keeps the paper's values.
   Its stage-3 maps are pyramids gated by the photos' pixels per texel, and unseen texels are completed
   (docs/textures.md): per-texel maps fill with colour noise where the photo does not resolve texels.
+  Stage 3 stops early once its loss has settled (``Iterations.stage3_tolerance``).
 - ``deface-tone``: ``deface`` that keeps the person's skin tone (``tone``): the albedo's tone is free along a
   flat-prior tone axis and the lights are held to the scene's illuminant (docs/skin-tone.md). Without it
   the lights absorb every skin's tone and all textures come out alike (slope 0.08 vs 0.81 on the skin-tone
@@ -81,6 +82,10 @@ def _nextface(name: str, restrict_to_face: bool) -> FitConfig:
 FOURIER_OCTAVES = 4
 
 
+# Stage 3's early stop in `deface` and `fast`: less than 0.5 % loss decrease per 20 steps (Iterations; on a
+# 256² photo the last ~80 of 200 steps lowered the loss ~1 % in all; BENCHMARKS.md "Speed").
+STAGE3_TOLERANCE = 0.005
+
 # Levels of the stage-3 texture pyramid in the default preset (deface/texture/pyramid.py, BENCHMARKS.md).
 TEXTURE_LEVELS = 5
 
@@ -90,6 +95,7 @@ def _deface() -> FitConfig:
         preset="deface",
         lights=LightConfig(num_lights=3),
         decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES),
+        iterations=Iterations(stage3_tolerance=STAGE3_TOLERANCE),
         texture_pyramid=PyramidConfig(levels=TEXTURE_LEVELS),
         completion=CompletionConfig(enabled=True),
     )
@@ -101,7 +107,8 @@ def _deface_tone() -> FitConfig:
 
 def _fast() -> FitConfig:
     return override(_deface(), preset="fast", resolution=192, texture_size=256, **{"render.shadow_rays": 64},
-                    iterations=Iterations(stage1=150, stage2=150, stage3=60), **{"decouple.ace_iteration": 50})
+                    iterations=Iterations(stage1=150, stage2=150, stage3=60, stage3_tolerance=STAGE3_TOLERANCE),
+                    **{"decouple.ace_iteration": 50})
 
 
 PRESETS = {

@@ -13,6 +13,7 @@ import torch
 
 from deface.decouple.ace import light_areas
 from deface.fit.config import FitConfig
+from deface.fit.convergence import converged
 from deface.fit.decoupling import Decoupling
 from deface.fit.guard import StepGuard
 from deface.fit.scene import SceneParameters, frame_geometry
@@ -139,6 +140,12 @@ def run_stage2(context: StageContext) -> list[float]:
         value = float(loss.detach())
         history.append(value)
         context.log.step("stage 2", step, config.iterations.stage2, value)
+        iterations = config.iterations
+        if step + 1 < iterations.stage2 and converged(history, iterations.convergence_window,
+                                                      iterations.stage2_tolerance, start=ace_at + 1):
+            context.log.info(f"stage 2 converged after {step + 1} of {iterations.stage2} steps "
+                             f"(tolerance {iterations.stage2_tolerance} per {iterations.convergence_window} steps)")
+            break
     return history
 
 

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from deface.fit import fast_stage3
+from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
 from deface.fit.stage2 import FrameRender, StageContext
 from deface.fit.texels import frame_views
@@ -84,8 +86,8 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
     guard = StepGuard(optimiser, "stage 3", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
     loss_of = objective(context, frozen, initial, human_prior)
-    history = []
-    for step in range(context.config.iterations.stage3):
+    history, iterations = [], context.config.iterations
+    for step in range(iterations.stage3):
         optimiser.zero_grad(set_to_none=True)
         loss = loss_of(parameters.textures())
         loss.backward()
@@ -93,7 +95,12 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
         guard.check(loss)
         value = float(loss.detach())
         history.append(value)
-        context.log.step("stage 3", step, context.config.iterations.stage3, value)
+        context.log.step("stage 3", step, iterations.stage3, value)
+        if step + 1 < iterations.stage3 and converged(history, iterations.convergence_window,
+                                                      iterations.stage3_tolerance):
+            context.log.info(f"stage 3 converged after {step + 1} of {iterations.stage3} steps "
+                             f"(tolerance {iterations.stage3_tolerance} per {iterations.convergence_window} steps)")
+            break
     with torch.no_grad():
         return Stage3Result(parameters.textures(), initial, frozen, history, views)
 
@@ -101,10 +108,11 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
 def objective(context: StageContext, frozen: list[FrozenFrame], initial: Textures, human_prior=None):
     """The stage-3 loss as a function of the textures; its texture-space constants are computed once."""
     palette, uv_mask = _palette(context, initial), _uv_mask(context, initial)
+    texture_terms = _texture_terms_of(context, initial, palette, uv_mask)
 
     def loss_of(textures: Textures) -> torch.Tensor:
         loss = sum(_frame_loss(context, f, textures, human_prior) for f in frozen) / len(frozen)
-        return loss + _texture_terms(context, textures, initial, palette, uv_mask) + context.scene_light_prior()
+        return loss + texture_terms(textures) + context.scene_light_prior()
 
     return loss_of
 
@@ -190,9 +198,12 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, h
 def _local_prior(output, reference: dict, coverage: torch.Tensor, weights: tuple[float, float, float]) -> torch.Tensor:
     """LP on screen-space albedo, ``weights`` x (diffuse, specular, roughness) (the authors' 5 / 6 / 1)."""
     diffuse, specular, roughness = weights
-    return (diffuse * local_prior(output.diffuse, reference["diffuse"], coverage)
-            + specular * local_prior(output.specular, reference["specular"], coverage)
-            + roughness * local_prior(output.roughness, reference["roughness"], coverage))
+    prior = local_prior
+    if fast_stage3.enabled(output.diffuse, reference["diffuse"], coverage):
+        prior = fast_stage3.local_prior_l1  # the same LP (5x5, L1), fused with its gradient
+    return (diffuse * prior(output.diffuse, reference["diffuse"], coverage)
+            + specular * prior(output.specular, reference["specular"], coverage)
+            + roughness * prior(output.roughness, reference["roughness"], coverage))
 
 
 def _palette(context: StageContext, initial: Textures):
@@ -207,6 +218,16 @@ def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:
     mask = torch.as_tensor(context.model.albedo.face_mask, dtype=torch.float32)
     size = initial.diffuse.shape[0]
     return torch.nn.functional.interpolate(mask[None, None], size=(size, size), mode="bilinear")[0, 0]
+
+
+def _texture_terms_of(context: StageContext, initial: Textures, palette, uv_mask):
+    """textures -> the texture-space terms: the fused kernels (deface/fit/fast_stage3.py) on the CPU, else
+    the torch reference :func:`_texture_terms`."""
+    weights = context.config.weights
+    if fast_stage3.enabled(initial.diffuse, initial.specular, initial.roughness, uv_mask):
+        return fast_stage3.TextureTerms(initial, uv_mask, palette, weights.texture_regulariser,
+                                        weights.global_prior)
+    return lambda textures: _texture_terms(context, textures, initial, palette, uv_mask)
 
 
 def _texture_terms(context: StageContext, textures: Textures, initial: Textures, palette, uv_mask) -> torch.Tensor:

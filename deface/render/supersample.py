@@ -13,6 +13,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from deface.render import fast_box
 from deface.render.camera import Camera
 from deface.render.renderer import RenderOutput
 
@@ -60,7 +61,9 @@ def box_filter(output: RenderOutput, factor: int) -> RenderOutput:
 
 
 def _pool(values: torch.Tensor, factor: int) -> torch.Tensor:
-    """Block mean of [..., sH, sW, C] -> [..., H, W, C]."""
+    """Block mean of [..., sH, sW, C] -> [..., H, W, C] (a numba loop on the CPU: deface/render/fast_box.py)."""
+    if fast_box.enabled(values):
+        return fast_box.block_mean(values, factor)
     lead, (height, width, channels) = values.shape[:-3], values.shape[-3:]
     planes = values.reshape(-1, height, width, channels).permute(0, 3, 1, 2)
     pooled = F.avg_pool2d(planes, factor)
