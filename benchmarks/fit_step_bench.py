@@ -22,7 +22,6 @@ from deface.fit.log import FitLog
 from deface.fit.stage2 import _stage2_loss
 from deface.fit.target import FitTarget
 from deface.io.images import load_image
-from deface.models import load_face_model
 from deface.paths import shared_dir
 
 
@@ -42,8 +41,7 @@ def main() -> None:
         config = override(config, supersampling=args.supersampling)
     log = FitLog(quiet=True)
     work, landmarks, scale, _ = pipeline.detect([load_image(args.photo)], config, str(args.photo), False)
-    context = pipeline._stage1(load_face_model("ict"), FitTarget(work, landmarks, scale), config, log)
-    pipeline._face_classifier(context, config, None, log)
+    context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=log)
     _stage2_loss(context, True, True).backward()  # shadow transfer and caches
     step = _stage2_step(context) if args.stage == 2 else _stage3_step(context)
     walls, cpus = [], []
