@@ -12,7 +12,7 @@ orthonormal SH, index ``l*l + l + m``, radiance towards the light, model frame: 
   Row 0 is straight up (+y); the centre column looks from the face towards the camera (+z, the light that
   falls on the front of the face), and columns to the right turn towards +x (the subject's left).
 
-Sources other than an SH file are scaled so the brightest diffuse response of a white surface is
+Presets and maps are windowed against ringing (:func:`windowed`). Sources other than an SH file are scaled so the brightest diffuse response of a white surface is
 :data:`LEVEL` (the neutral light's frontal response is 1); ``exposure`` (EV) scales any of them.
 :func:`rotate_lights` turns lights about the vertical axis (``--rotate-light``).
 """
@@ -65,6 +65,15 @@ def diffuse_peak(lights: torch.Tensor, samples: int = 4000) -> float:
     basis = sh_basis(torch.as_tensor(fibonacci_sphere(samples), dtype=torch.float32), bands)  # [N, B*B]
     irradiance = basis @ (cosine_lobe_coefficients(bands)[:, None] * lights.sum(0)) / math.pi  # [N, 3]
     return float(irradiance.max())
+
+
+def windowed(lights: torch.Tensor) -> torch.Tensor:
+    """``lights`` [K, B*B, 3] with band l scaled by the Hann window (1 + cos(pi l / B)) / 2: a light sharper
+    than B bands can hold rings (negative radiance opposite a small sun); the window trades that for a
+    softer edge (Sloan 2008, "Stupid spherical harmonics tricks", windowing)."""
+    bands = int(round(lights.shape[1] ** 0.5))
+    degree = torch.tensor([float(math.isqrt(i)) for i in range(bands * bands)], dtype=lights.dtype)
+    return lights * (0.5 * (1.0 + torch.cos(math.pi * degree / bands)))[None, :, None]
 
 
 def normalised(lights: torch.Tensor, level: float = LEVEL) -> torch.Tensor:
@@ -124,7 +133,7 @@ def preset_lights(name: str, bands: int) -> torch.Tensor:
     directions = fibonacci_sphere(SPHERE_SAMPLES)
     radiance = PRESETS[name](directions)
     coeffs = project_to_sh(directions, radiance, np.full(len(directions), 4 * math.pi / len(directions)), bands)
-    return normalised(coeffs[None])
+    return normalised(windowed(coeffs[None]))
 
 
 def equirect_directions(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -144,7 +153,7 @@ def environment_lights(image: np.ndarray, bands: int) -> torch.Tensor:
     image = _downsample(np.asarray(image, dtype=np.float64), ENV_MAX_WIDTH)
     directions, solid = equirect_directions(*image.shape[:2])
     coeffs = project_to_sh(directions.reshape(-1, 3), image.reshape(-1, 3), solid.reshape(-1), bands)
-    return normalised(coeffs[None])
+    return normalised(windowed(coeffs[None]))
 
 
 def _downsample(image: np.ndarray, max_width: int) -> np.ndarray:
