@@ -12,9 +12,10 @@ orthonormal SH, index ``l*l + l + m``, radiance towards the light, model frame: 
   Row 0 is straight up (+y); the centre column looks from the face towards the camera (+z, the light that
   falls on the front of the face), and columns to the right turn towards +x (the subject's left).
 
-Presets and maps are windowed against ringing (:func:`windowed`). Sources other than an SH file are scaled so the brightest diffuse response of a white surface is
-:data:`LEVEL` (the neutral light's frontal response is 1); ``exposure`` (EV) scales any of them.
-:func:`rotate_lights` turns lights about the vertical axis (``--rotate-light``).
+Presets and maps are windowed against ringing (:func:`windowed`). Sources other than an SH file are scaled
+so the brightest diffuse response of a white surface is :data:`LEVEL` (the neutral light's frontal response
+is 1); ``--exposure`` (EV) scales any of them. :func:`rotate_lights` turns lights about the vertical axis
+(``--rotate-light``).
 """
 
 from __future__ import annotations
