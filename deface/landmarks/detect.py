@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from deface.landmarks.quiet import native_log_filter, quiet_environment
+
 NUM_LANDMARKS = 478
 MIN_RETRY_SIZE = 384  # tiny images are upscaled to this (longest side) before retrying
 
@@ -61,16 +63,18 @@ class FaceMeshDetector:
     """A MediaPipe Face Mesh instance (static or tracking mode); close it or use it as a context manager."""
 
     def __init__(self, static: bool = True, max_faces: int = 4, min_confidence: float = 0.5):
-        from mediapipe.python.solutions import face_mesh
+        quiet_environment()
+        with native_log_filter():
+            from mediapipe.python.solutions import face_mesh
 
-        self.static = static
-        self._mesh = face_mesh.FaceMesh(
-            static_image_mode=static,
-            max_num_faces=max_faces,
-            refine_landmarks=True,
-            min_detection_confidence=min_confidence,
-            min_tracking_confidence=min_confidence,
-        )
+            self.static = static
+            self._mesh = face_mesh.FaceMesh(
+                static_image_mode=static,
+                max_num_faces=max_faces,
+                refine_landmarks=True,
+                min_detection_confidence=min_confidence,
+                min_tracking_confidence=min_confidence,
+            )
 
     def __enter__(self) -> FaceMeshDetector:
         return self
@@ -79,12 +83,14 @@ class FaceMeshDetector:
         self.close()
 
     def close(self) -> None:
-        self._mesh.close()
+        with native_log_filter():
+            self._mesh.close()
 
     def raw_faces(self, image: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Run MediaPipe once on uint8 [H, W, 3] -> [(points [478, 2], depth [478])] in MediaPipe's order."""
         height, width = image.shape[:2]
-        result = self._mesh.process(image)
+        with native_log_filter():  # MediaPipe's C++ notices (deface/landmarks/quiet.py)
+            result = self._mesh.process(image)
         faces = []
         for face in result.multi_face_landmarks or []:
             xyz = np.array([(p.x, p.y, p.z) for p in face.landmark], dtype=np.float32)  # [478, 3]
