@@ -199,3 +199,39 @@ def test_turntable_starts_at_the_fit_view_and_writes_video(written, tmp_path):
             import imageio.v3 as iio
 
             assert iio.imread(path).shape[0] == 4
+
+
+def test_report_renders_in_chromium_with_every_image_and_no_console_message(written, tmp_path):
+    """Debian's chromium (installed by .ci/run) opens report.html offline: all images decode (the page's own
+    check sets data-images), the console stays silent, and a screenshot is taken."""
+    import re
+    import shutil
+    import subprocess
+
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("chromium is not installed (.ci/run installs it)")
+    page = (written / "report.html").resolve().as_uri()
+    flags = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--enable-logging=stderr",
+             "--v=0", "--virtual-time-budget=8000", f"--user-data-dir={tmp_path / 'profile'}"]
+    dom = subprocess.run([*flags, "--dump-dom", page], capture_output=True, text=True, timeout=180)
+    images = len(re.findall(r"<img ", (written / "report.html").read_text()))
+    assert f'data-images="ok {images}"' in dom.stdout, re.findall(r'data-images="[^"]*"', dom.stdout)
+    assert not [line for line in dom.stderr.splitlines() if ":CONSOLE" in line], dom.stderr
+    shot = tmp_path / "report.png"
+    subprocess.run([*flags, "--window-size=1200,2400", f"--screenshot={shot}", page], capture_output=True,
+                   timeout=180)
+    pixels = np.asarray(Image.open(shot).convert("RGB"))
+    assert pixels.shape[:2] == (2400, 1200) and pixels.std() > 10  # a page with content, not a blank one
+    for part in ("report/losses.png", "report/turntable.gif", "report/neutral.png", "textures/diffuse.png"):
+        assert (written / part).is_file(), part
+
+
+def test_batch_index_links_each_report(photos, tmp_path, written):
+    import shutil
+
+    from deface.report.html import write_index
+
+    shutil.copytree(written, tmp_path / "a")
+    index = write_index(tmp_path, ["a", "missing"]).read_text()
+    assert 'href="a/report.html"' in index and "missing" not in index

@@ -29,6 +29,7 @@ from deface.io.video import read_spread_frames
 from deface.landmarks.detect import NoFaceError
 from deface.models.registry import require_face_model
 from deface.paths import ModelFileError
+from deface.report.html import write_index
 
 # Failures of one input that are explained by their message (OSError: disk, permissions, missing files).
 EXPECTED_ERRORS = (InputError, NoFaceError, ModelFileError, OutputError, NonFiniteError, ValueError, OSError)
@@ -144,7 +145,8 @@ def run(items: list[InputItem], output: Path, config: FitConfig, models=None, ov
         console.print(f"interrupted ({stop}) during {current.path}: {tally.summary()}, {tally.remaining} not "
                       f"done; run the same command again to resume (finished inputs are skipped)")
         raise typer.Exit(128 + stop.signum) from None
-    console.print(f"{tally.summary()}; outputs in {output}")
+    write_index(output, [item.name for item in items])
+    console.print(f"{tally.summary()}; outputs in {output} (index.html)")
     return tally.failed
 
 

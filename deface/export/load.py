@@ -6,6 +6,7 @@ renders (tests/test_fit_state.py); the textures come from ``params.npz`` (float1
 
 from __future__ import annotations
 
+import csv
 import json
 from dataclasses import fields, is_dataclass
 from pathlib import Path
@@ -48,7 +49,8 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
             _tensor(arrays["face_region"][frame]), arrays["landmarks_2d"][frame],
             (camera, renderer.rasterize(geometry.mesh, camera))))
     textures = Textures(*(_tensor(arrays[name]) for name in ("diffuse", "specular", "roughness")))
-    record = RunRecord(params.get("seconds_per_stage", {}), {}, {}, params.get("notes", []),
+    losses, terms = read_loss_log(folder / "loss_log.csv")
+    record = RunRecord(params.get("seconds_per_stage", {}), losses, terms, params.get("notes", []),
                        params.get("optional_networks", {}))
     return FitOutput(model, config, tuple(frames), pose.identity, pose.expression, pose.rotation,
                      pose.translation, pose.focal, _tensor(arrays["albedo"]), _tone(params),
@@ -74,6 +76,21 @@ def _read(folder: Path) -> tuple[dict[str, np.ndarray], dict]:
         raise FitFormatError(f"{folder}: params.npz format {version} is newer than this deface reads "
                              f"({PARAMS_FORMAT}); update deface")
     return arrays, params
+
+
+def read_loss_log(path: Path) -> tuple[dict[str, list[float]], dict[str, list[dict[str, float]]]]:
+    """The loss curves of ``loss_log.csv`` (stage -> totals, stage -> named terms per step); empty if absent."""
+    losses: dict[str, list[float]] = {}
+    terms: dict[str, list[dict[str, float]]] = {}
+    if not path.is_file():
+        return losses, terms
+    with path.open(newline="") as handle:
+        for row in csv.DictReader(handle):
+            stage = row.pop("stage")
+            row.pop("step", None)
+            losses.setdefault(stage, []).append(float(row.pop("loss")))
+            terms.setdefault(stage, []).append({name: float(value) for name, value in row.items() if value})
+    return losses, terms
 
 
 def _transfer(arrays: dict[str, np.ndarray], frame: int, config: FitConfig) -> ShadowTransfer | None:

@@ -9,6 +9,7 @@ render.png, render_face.png                I_out and I_R (sRGB); for a clip unde
 lights/<k>.png, masks/light_<k>.png        I_Rs and M_L of each kept light k (k = the light's index)
 masks/face.png                             M_o
 loss_log.csv                               stage, step, loss, then one column per named loss term
+report.html + report/                      the page that shows the fit (deface/report/html.py)
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from deface.export.files import save_png, staged_directory, to_uint8, write_json
 from deface.export.mesh import TEXTURE_FILES, write_glb, write_obj
 from deface.fit.config import to_dict
 from deface.fit.output import FitOutput
+from deface.report.html import write_report
 
 PARAMS_FORMAT = 2
 """Version of ``params.npz`` (its ``format_version``): 2 holds everything :func:`deface.export.load.load_fit`
@@ -39,6 +41,7 @@ def write_fit(result: FitOutput, final_folder: Path, record: dict) -> Path:
         _write_renders(result, renders, folder)
         _write_params(result, renders, folder, record)
         _write_loss_log(result, folder)
+        write_report(result, folder, final_folder.name)
     return final_folder
 
 

@@ -235,7 +235,7 @@ def rotate_lights(lights: torch.Tensor, rotation: np.ndarray) -> torch.Tensor:
     """``lights`` [K, B*B, 3] turned by the rotation matrix [3, 3]: L'(w) = L(R^T w). Exact for band-limited
     lights (rotations keep each band): least squares on sphere samples."""
     bands = int(round(lights.shape[1] ** 0.5))
-    directions = torch.as_tensor(fibonacci_sphere(max(4 * bands**4, 400)), dtype=torch.float64)
+    directions = torch.as_tensor(fibonacci_sphere(max(8 * bands * bands, 200)), dtype=torch.float64)
     basis = sh_basis(directions, bands)  # [N, B*B]
     turned = sh_basis(directions @ torch.as_tensor(rotation, dtype=torch.float64), bands)  # Y(R^T w)
     matrix = torch.linalg.lstsq(basis, turned).solution  # [B*B, B*B]: c' = M c
