@@ -126,7 +126,8 @@ def _loss_curves(fit: FitOutput, path: Path) -> bool:
             values = np.array([abs(terms.get(term, np.nan)) for terms in steps])
             if np.nanmax(values, initial=0) > 0:
                 axis.plot(values, label=term, linewidth=1.2)
-        axis.plot(np.abs(fit.record.losses.get(stage, [])), label="total", color="black", linewidth=1.6)
+        axis.plot(np.abs(fit.record.losses.get(stage, [])), label="total", color="black", linewidth=1.2,
+                  linestyle="--")
         axis.set_yscale("log")
         axis.set_title(stage)
         axis.set_xlabel("step")
