@@ -26,7 +26,8 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
     paper, deface = _flatten(to_dict(presets.get("paper"))), _flatten(to_dict(presets.get("deface")))
     changed = {key: deface[key] for key in paper if paper[key] != deface[key]}
     assert changed == {"preset": "deface", "decouple.face_region": False, "decouple.epsilon": 0.09,
-                       "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES}
+                       "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES,
+                       "texture_pyramid.levels": presets.TEXTURE_LEVELS, "completion.enabled": True}
 
 
 def test_deface_tone_is_deface_with_the_skin_tone_work():

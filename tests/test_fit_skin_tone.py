@@ -67,7 +67,7 @@ def fit_scene(ita: float, cct: float, preset: str = "deface-tone", **changes):
 
 
 def recovered_ita(state) -> float:
-    return texture_ita(linear_to_srgb(state.stage3.textures.diffuse.numpy().clip(0, 1)))
+    return texture_ita(linear_to_srgb(state.finished.textures.diffuse.numpy().clip(0, 1)))
 
 
 @pytest.fixture(scope="module")

@@ -65,6 +65,9 @@ TABLES = [
                                                  ("B = 15", "sh15"), ("B = 18", "sh18")]),
 ]
 
+UV_TABLE = ("UV-space textures (issue 12)", [("NextFace", "nextface"), ("Paper preset", "paper"),
+                                             ("Ours (default preset)", "ours")])
+
 # The schedules: "full" is each preset as it is; "quick" is the CPU benchmark schedule used for the
 # recorded tables (128-px working images, half-length stages), applied to every variant alike.
 SCHEDULES = {
@@ -95,7 +98,7 @@ def _run_pair(task: tuple) -> tuple[str, str, float]:
     outcome = evaluate_pair(pair, config, folder, models_dir)
     cached.write_text(json.dumps({"source": outcome.scores.source, "target": outcome.scores.target,
                                   "seconds_per_fit": outcome.seconds_per_fit, "albedo_ita": outcome.albedo_ita,
-                                  "config": config_json(config)}, indent=1))
+                                  "uv": outcome.uv, "config": config_json(config)}, indent=1))
     return variant_name, pair.name, outcome.seconds_per_fit
 
 
@@ -137,16 +140,26 @@ def map_in_processes(function, tasks: list, jobs: int):
 
 
 def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
-    scores, seconds, ita_gaps = [], [], []
+    scores, seconds, ita_gaps, uv = [], [], [], []
     for pair in pairs:
         data = json.loads((out_dir / name / pair.name / "scores.json").read_text())
         scores.append(PairScores(pair.name, data["source"], data["target"]))
         seconds.append(data["seconds_per_fit"])
         if "albedo_ita" in data:
             ita_gaps.append(abs(data["albedo_ita"]["source"] - data["albedo_ita"]["target"]))
+        if data.get("uv", {}).get("consistency"):
+            uv.append(data["uv"])
     write_metrics_json(out_dir / name / "metrics.json", name, scores)
     gap = sum(ita_gaps) / len(ita_gaps) if len(ita_gaps) == len(pairs) else None
-    (out_dir / name / "timing.json").write_text(json.dumps({"seconds_per_fit": seconds, "albedo_ita_gap": gap}))
+    (out_dir / name / "timing.json").write_text(json.dumps({"seconds_per_fit": seconds, "albedo_ita_gap": gap,
+                                                            "uv": _mean_uv(uv) if len(uv) == len(pairs) else None}))
+
+
+def _mean_uv(uv: list[dict]) -> dict:
+    """Means over pairs of the UV consistency scores and the speckle (deface/eval/uv_measure.py)."""
+    mean = {key: sum(item["consistency"][key] for item in uv) / len(uv) for key in ("psnr", "ssim", "lpips")}
+    mean["speckle"] = sum(item["speckle"] for item in uv) / len(uv)
+    return mean
 
 
 def _fitted_now(out_dir: Path, name: str, schedule: str, pairs: list[Pair]) -> bool:
@@ -172,6 +185,18 @@ def _row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair])
     text.append(f"{identity['distance']:.3f}" if identity else "-")
     text.append(f"{gap:.1f}" if gap is not None else "-")
     return f"| {label} | " + " | ".join(text) + f" | {sum(seconds) / len(seconds):.0f} |"
+
+
+def _uv_row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair]) -> str:
+    timing_path = out_dir / name / "timing.json"
+    if not timing_path.exists() or not _fitted_now(out_dir, name, schedule, pairs):
+        return f"| {label} | not run with the current configuration | | | | |"
+    uv = json.loads(timing_path.read_text()).get("uv")
+    if uv is None:
+        return f"| {label} | not measured (cached pairs predate the UV measure) | | | | |"
+    synthesis = json.loads((out_dir / name / "metrics.json").read_text())["mean"]["target"]["face"]["psnr"]
+    return (f"| {label} | {uv['psnr']:.2f} | {uv['ssim']:.3f} | {uv['lpips']:.2f} | {uv['speckle']:.2f}"
+            f" | {synthesis:.2f} |")
 
 
 def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str, limit: int | None = None) -> str:
@@ -201,6 +226,14 @@ def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str,
     for title, rows in TABLES:
         table = [_row(out_dir, label, name, schedule, pairs) for label, name in rows]
         lines += [f"### {title}", "", header, *table, ""]
+    lines += [
+        f"### {UV_TABLE[0]}", "",
+        "UV PSNR / SSIM / LPIPS x100: the source fit's diffuse map against the target fit's (same person and pose,"
+        " shadowed vs clean photo), over the texels both fits saw within 60 degrees inside h; speckle: the maps'"
+        " high-frequency contrast beyond the photo's at that scale, % (0 = none; docs/textures.md);"
+        " synthesis = target synthesis PSNR face, as above.", "",
+        "| | UV PSNR | UV SSIM | UV LPIPS | speckle | synthesis PSNR face |\n|---|---|---|---|---|---|",
+        *[_uv_row(out_dir, label, name, schedule, pairs) for label, name in UV_TABLE[1]], ""]
     lines.append(f"_Written {time.strftime('%Y-%m-%d %H:%M')}._")
     return "\n".join(lines) + "\n"
 

@@ -19,6 +19,7 @@ from deface.eval import identity
 from deface.eval.metrics import composite, mean_scores, score_images
 from deface.eval.pairs import Pair
 from deface.eval.report import PairScores, ReportRow
+from deface.eval.uv_measure import SEEN, both_seen, speckle, uv_consistency
 from deface.export.files import save_png
 from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
@@ -27,6 +28,7 @@ from deface.fit.pipeline import fit
 from deface.io.images import linear_to_srgb, load_image
 from deface.models.ita import texture_ita
 from deface.relight.transfer import transfer_renders
+from deface.texture.confidence import unwrap
 
 
 @dataclass(frozen=True)
@@ -35,6 +37,7 @@ class PairOutcome:
     row: ReportRow
     seconds_per_fit: float
     albedo_ita: dict  # {"source": ITA, "target": ITA} of the two fits' diffuse textures (same person)
+    uv: dict  # UV-space measures (deface/eval/uv_measure.py): consistency, speckle, texels compared
 
 
 def fit_side(paths: list[Path], config: FitConfig, models_dir, name: str, quiet: bool) -> FitOutput:
@@ -82,7 +85,24 @@ def evaluate_pair(pair: Pair, config: FitConfig, folder: Path, models_dir=None, 
     images = _save_images(folder, source, target, source_outputs[0], swap_outputs[0])
     scores = PairScores(pair.name, source_scores, swap_scores)
     row = ReportRow(pair.name, images, {"source": source_scores, "target": swap_scores})
-    return PairOutcome(scores, row, seconds, {"source": _albedo_ita(source), "target": _albedo_ita(target)})
+    return PairOutcome(scores, row, seconds, {"source": _albedo_ita(source), "target": _albedo_ita(target)},
+                       uv_scores(source, target))
+
+
+def uv_scores(source: FitOutput, target: FitOutput) -> dict:
+    """The two fits' diffuse maps compared in UV space, and their speckle (mean of both fits)."""
+    region = both_seen(source.seen, target.seen)
+    srgb = [linear_to_srgb(_np(fit.textures.diffuse).clip(0, 1)) for fit in (source, target)]
+    return {"consistency": uv_consistency(*srgb, region), "texels": int(region.sum()),
+            "speckle": float(np.mean([fit_speckle(fit) for fit in (source, target)]))}
+
+
+def fit_speckle(result: FitOutput) -> float:
+    """Speckle of a fit's diffuse map against its first frame read in UV, over the texels that frame saw."""
+    view = result.views[0]
+    region = view.seen(_np(result.frames[0].face_region)) >= SEEN
+    photo = unwrap(result.frames[0].photo.numpy(), view)
+    return speckle(_np(result.textures.diffuse), photo, region)
 
 
 def _albedo_ita(result: FitOutput) -> float:

@@ -19,6 +19,7 @@ from deface.export.outputs import PARAMS_FORMAT
 from deface.fit.config import FitConfig, override
 from deface.fit.output import FitOutput, OutputFrame, RunRecord, StoredPose, frozen_geometry
 from deface.fit.target import FitTarget
+from deface.fit.texels import frame_views
 from deface.models.registry import load_face_model
 from deface.render.mesh import Textures
 from deface.render.renderer import Renderer, ShadowTransfer
@@ -52,11 +53,14 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     losses, terms = read_loss_log(folder / "loss_log.csv")
     record = RunRecord(params.get("seconds_per_stage", {}), losses, terms, params.get("notes", []),
                        params.get("optional_networks", {}))
+    views = tuple(frame_views(model, frames, textures.diffuse.shape[0]))
+    seen, confidence = (arrays[name].astype(np.float32) if name in arrays else None
+                        for name in ("texture_seen", "texture_confidence"))
     return FitOutput(model, config, tuple(frames), pose.identity, pose.expression, pose.rotation,
                      pose.translation, pose.focal, _tensor(arrays["albedo"]), _tone(params),
                      _tensor(arrays["lights"]), tuple(int(k) for k in arrays["kept"]), textures, None,
-                     params.get("illuminant"), float(params["camera"].get("working_scale", 1.0)),
-                     None, record, renderer)
+                     seen, confidence, views, params.get("illuminant"),
+                     float(params["camera"].get("working_scale", 1.0)), None, record, renderer)
 
 
 def _read(folder: Path) -> tuple[dict[str, np.ndarray], dict]:

@@ -2,6 +2,8 @@
 
 textures/{diffuse,specular,roughness}.png  UV maps. diffuse: sRGB-encoded base colour (what viewers expect);
                                            specular, roughness: linear data (Blender: "Non-Color").
+textures/confidence.png                    how well the photo(s) constrain each texel, linear grey in [0, 1]
+                                           (docs/textures.md)
 mesh.obj + mesh.mtl, mesh.glb              fitted mesh (cm; GLB in metres), a photo's expression; for a clip
                                            the identity with a neutral expression
 params.json, params.npz                    named parameters and the run record; large arrays in the npz
@@ -50,6 +52,8 @@ def _write_textures(result: FitOutput, folder: Path) -> None:
     save_png(folder / TEXTURE_FILES["diffuse"], _np(textures.diffuse), srgb=True)
     save_png(folder / TEXTURE_FILES["specular"], _np(textures.specular), srgb=False)
     save_png(folder / TEXTURE_FILES["roughness"], _np(textures.roughness), srgb=False)
+    if result.confidence is not None:
+        save_png(folder / "textures" / "confidence.png", result.confidence[..., None], srgb=False)
 
 
 def _write_mesh(result: FitOutput, folder: Path) -> None:
@@ -129,6 +133,10 @@ def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
         "face_classifier": np.stack([_np(frame.face_classifier) for frame in frames]).astype(np.float32),
         "photos_srgb": np.stack([frame.photo_srgb for frame in frames]).astype(np.float16),
     }
+    if result.seen is not None:
+        arrays["texture_seen"] = result.seen.astype(np.float16)
+    if result.confidence is not None:
+        arrays["texture_confidence"] = result.confidence.astype(np.float16)
     if frames[0].transfer is not None:
         arrays["transfer_occluded"] = np.stack([_np(frame.transfer.occluded) for frame in frames])
         arrays["transfer_visibility"] = np.stack([_np(frame.transfer.visibility) for frame in frames])

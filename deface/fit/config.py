@@ -10,6 +10,8 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any, Literal
 
 from deface.priors.illuminant import IlluminantConfig
+from deface.texture.completion import CompletionConfig
+from deface.texture.pyramid import PyramidConfig
 
 
 @dataclass(frozen=True)
@@ -153,6 +155,11 @@ class FitConfig:
     learning_rates: LearningRates = field(default_factory=LearningRates)
     priors: PriorConfig = field(default_factory=PriorConfig)
     tone: ToneConfig = field(default_factory=ToneConfig)
+    texture_pyramid: PyramidConfig = field(default_factory=PyramidConfig)
+    """How stage 3 parametrises the UV maps (deface/texture/pyramid.py): levels gated by the photos' pixels per
+    texel, so no texel is freer than the photos make it."""
+    completion: CompletionConfig = field(default_factory=CompletionConfig)
+    """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
     supersampling: int = 2
     """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
     render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between

@@ -23,6 +23,7 @@ from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import Fragments, Renderer, ShadowTransfer
 from deface.render.supersample import shade_supersampled, supersampled_camera
+from deface.texture.confidence import TexelView
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,15 @@ class RunRecord:
     def from_log(cls, log: FitLog, optional_networks: dict[str, str]) -> RunRecord:
         return cls(dict(log.seconds), {k: list(v) for k, v in log.losses.items()},
                    {k: list(v) for k, v in log.terms.items()}, list(log.notes), dict(optional_networks))
+
+
+@dataclass(frozen=True)
+class FinishedTextures:
+    """Stage 3's maps after texture completion, and what the frames tell about each texel (deface/fit/texels.py)."""
+
+    textures: Textures  # the final UV maps (completed where no frame saw the texel, when completion is on)
+    seen: np.ndarray  # [Ht, Wt] visible x h x facing, best frame (what completion went by)
+    confidence: np.ndarray  # [Ht, Wt] how well the frames constrain each texel
 
 
 @dataclass(frozen=True)
@@ -76,8 +86,11 @@ class FitOutput:
     tone: float  # ITA degrees on the albedo model's tone axis (its start value when the tone is not free)
     lights: torch.Tensor  # [n, B*B, 3] every light's SH (stage-3 values); only ``kept`` are used
     kept: tuple[int, ...]  # indices of the lights ACE kept
-    textures: Textures  # the refined UV maps
+    textures: Textures  # the final UV maps
     initial_textures: Textures | None  # T^0 from the albedo model (None when loaded from files)
+    seen: np.ndarray | None  # [Ht, Wt] how squarely some frame saw each texel inside h (None: unknown)
+    confidence: np.ndarray | None  # [Ht, Wt] how well the frames constrain each texel (None: unknown)
+    views: tuple[TexelView, ...]  # per frame: where each texel lands and how it is seen
     illuminant: dict | None  # the scene's illuminant estimate (its record), None when not estimated
     scale: float  # working / original resolution
     kept_frames: list[int] | None  # positions of the fitted frames among the input's (None: all)
@@ -105,14 +118,15 @@ class FitOutput:
 
     @classmethod
     @torch.no_grad()
-    def from_stages(cls, context: StageContext, stage3, record: RunRecord) -> FitOutput:
-        """The output of stages 2-3 (``stage3``: :class:`~deface.fit.stage3.Stage3Result`)."""
+    def from_stages(cls, context: StageContext, stage3, finished: FinishedTextures, record: RunRecord) -> FitOutput:
+        """The output of stages 2-3 (``stage3``: :class:`~deface.fit.stage3.Stage3Result`) and of the texture
+        completion (``finished``)."""
         from deface.fit.stage3 import render_frozen
 
         scene, target, config = context.scene, context.target, context.config
         frames = []
         for frozen in stage3.frozen:
-            rendered, _ = render_frozen(context, frozen, stage3.textures)
+            rendered, _ = render_frozen(context, frozen, finished.textures)
             frames.append(OutputFrame(
                 frozen.geometry, frozen.transfer, np.asarray(target.frames_srgb[frozen.index], dtype=np.float32),
                 context.inputs.face_classifier[frozen.index], rendered.light_masks.detach(),
@@ -123,7 +137,8 @@ class FitOutput:
         return cls(
             context.model, config, tuple(frames), *(p.detach().clone() for p in (
                 scene.identity, scene.expression, scene.rotation, scene.translation, scene.focal, scene.albedo)),
-            tone, scene.lights.detach().clone(), tuple(context.decoupling.kept), stage3.textures, stage3.initial,
+            tone, scene.lights.detach().clone(), tuple(context.decoupling.kept), finished.textures, stage3.initial,
+            finished.seen, finished.confidence, tuple(stage3.views),
             light.illuminant.record() if light is not None else None, target.scale, target.kept_frames, record,
             context.renderer)
 

@@ -19,14 +19,15 @@ import torch
 from deface.fit.config import FitConfig, override
 from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
-from deface.fit.output import FitOutput, RunRecord
+from deface.fit.output import FinishedTextures, FitOutput, RunRecord
 from deface.fit.scene import SceneParameters, initial_lights
 from deface.fit.scene_light import start_from_scene
 from deface.fit.stage1 import Stage1Config, fit_landmarks
 from deface.fit.stage2 import Stage2Result, run_stage2
-from deface.fit.stage3 import Stage3Result, run_stage3
+from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
 from deface.fit.target import FitTarget, scale_landmarks, working_frames
+from deface.fit.texels import complete_textures, seen_texels, texture_confidence
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.registry import load_face_model
@@ -43,11 +44,12 @@ class FitState:
     context: StageContext  # inputs, posed face, trained scene and decoupling
     stage2: Stage2Result
     stage3: Stage3Result
+    finished: FinishedTextures  # stage 3's maps completed, and what the frames tell about each texel
     optional_networks: dict[str, str]  # name -> "used" or the reason it was not
 
     def output(self) -> FitOutput:
         record = RunRecord.from_log(self.context.log, self.optional_networks)
-        return FitOutput.from_stages(self.context, self.stage3, record)
+        return FitOutput.from_stages(self.context, self.stage3, self.finished, record)
 
 
 def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool):
@@ -115,7 +117,22 @@ def _run_stages(target: FitTarget, config: FitConfig, models_dir, log: FitLog) -
     log.start("stage 3")
     stage3 = run_stage3(context, human_prior)
     log.stop("stage 3")
-    return FitState(context, stage2, stage3, optional)
+    log.start("textures")
+    finished = finish_textures(context, stage3)
+    log.stop("textures")
+    return FitState(context, stage2, stage3, finished, optional)
+
+
+@torch.no_grad()
+def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedTextures:
+    """Complete the texels no frame showed, and measure how well the frames constrain each texel."""
+    renders = [render_frozen(context, frame, stage3.textures)[0] for frame in stage3.frozen]
+    seen = seen_texels(stage3.views, [rendered.face_region for rendered in renders])
+    textures = stage3.textures
+    if context.config.completion.enabled:
+        textures = complete_textures(context.model, textures, stage3.initial, seen, context.config.completion)
+        renders = [render_frozen(context, frame, textures)[0] for frame in stage3.frozen]
+    return FinishedTextures(textures, seen, texture_confidence(stage3.views, renders))
 
 
 def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,

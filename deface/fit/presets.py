@@ -42,6 +42,8 @@ from deface.fit.config import (
     Weights,
     override,
 )
+from deface.texture.completion import CompletionConfig
+from deface.texture.pyramid import PyramidConfig
 
 # Chosen by the evaluation benchmark (BENCHMARKS.md records the comparison).
 DEFAULT_PRESET = "deface"
@@ -77,11 +79,17 @@ def _nextface(name: str, restrict_to_face: bool) -> FitConfig:
 FOURIER_OCTAVES = 4
 
 
+# Levels of the stage-3 texture pyramid in the default preset (deface/texture/pyramid.py, BENCHMARKS.md).
+TEXTURE_LEVELS = 5
+
+
 def _deface() -> FitConfig:
     return FitConfig(
         preset="deface",
         lights=LightConfig(num_lights=3),
         decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES),
+        texture_pyramid=PyramidConfig(levels=TEXTURE_LEVELS),
+        completion=CompletionConfig(enabled=True),
     )
 
 

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from deface.fit.guard import StepGuard
 from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, LossTerms, StageContext
+from deface.fit.texels import frame_views
 from deface.losses import decouple as decouple_losses
 from deface.losses.texture import texture_regularisers
 from deface.priors.global_prior import global_prior, kmeans_palette
@@ -23,6 +25,8 @@ from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import Fragments, RenderOutput, ShadowTransfer
 from deface.render.supersample import shade_supersampled, supersampled_camera
+from deface.texture.confidence import TexelView
+from deface.texture.pyramid import TexturePyramid, level_gates, level_sizes
 
 
 @dataclass(frozen=True)
@@ -48,16 +52,24 @@ class FrozenFrame:
 
 
 class TextureParameters(torch.nn.Module):
-    """The stage-3 UV maps, stored unconstrained and mapped to valid ranges by clamping in :meth:`textures`."""
+    """The stage-3 UV maps as gated pyramids over T^0 (deface/texture/pyramid.py), mapped to valid ranges by
+    clamping in :meth:`textures`."""
 
-    def __init__(self, initial: Textures):
+    def __init__(self, initial: Textures, gates: list[torch.Tensor]):
         super().__init__()
-        self.diffuse = torch.nn.Parameter(initial.diffuse.detach().clone())  # [Ht, Wt, 3]
-        self.specular = torch.nn.Parameter(initial.specular.detach().clone())  # [Ht, Wt, 3]
-        self.roughness = torch.nn.Parameter(initial.roughness.detach().clone())  # [Ht, Wt, 1]
+        self.diffuse = TexturePyramid(initial.diffuse, gates)  # [Ht, Wt, 3]
+        self.specular = TexturePyramid(initial.specular, gates)  # [Ht, Wt, 3]
+        self.roughness = TexturePyramid(initial.roughness, gates)  # [Ht, Wt, 1]
 
     def textures(self) -> Textures:
-        return Textures(self.diffuse.clamp(0, 1), self.specular.clamp(0, 1), self.roughness.clamp(0.05, 1))
+        return Textures(self.diffuse().clamp(0, 1), self.specular().clamp(0, 1), self.roughness().clamp(0.05, 1))
+
+
+def texture_gates(context: StageContext, views: list[TexelView], size: int) -> list[torch.Tensor]:
+    """The pyramid's gates from the frames' texel density (pixels per texel, summed over frames)."""
+    config = context.config.texture_pyramid
+    density = np.sum([view.density for view in views], axis=0)
+    return level_gates(density, level_sizes(size, config), config.gated)
 
 
 def initial_textures(context: StageContext) -> Textures:
@@ -73,13 +85,15 @@ class Stage3Result:
     frozen: list[FrozenFrame]  # per-frame constants, reused to re-render with any textures
     history: list[float]  # loss per iteration
     terms: list[dict[str, float]]  # the named terms per iteration (they sum to the total)
+    views: list[TexelView]  # per frame: how the frozen camera sees each texel
 
 
 def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     """Refine textures from T^0 with the frames' geometry frozen."""
     initial = initial_textures(context)
     frozen = freeze_frames(context, initial)
-    parameters = TextureParameters(initial)
+    views = frame_views(context.model, frozen, initial.diffuse.shape[0])
+    parameters = TextureParameters(initial, texture_gates(context, views, initial.diffuse.shape[0]))
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
     guard = StepGuard(optimiser, "stage 3", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
     loss_of = objective(context, frozen, initial, human_prior)
@@ -96,7 +110,7 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
         term_history.append(terms.values)
         context.log.step("stage 3", step, context.config.iterations.stage3, value, terms.values)
     with torch.no_grad():
-        return Stage3Result(parameters.textures(), initial, frozen, history, term_history)
+        return Stage3Result(parameters.textures(), initial, frozen, history, term_history, views)
 
 
 def objective(context: StageContext, frozen: list[FrozenFrame], initial: Textures, human_prior=None):
@@ -156,9 +170,9 @@ def _topology(context: StageContext):
 def _parameter_groups(context: StageContext, parameters: TextureParameters) -> list[dict]:
     rates = context.config.learning_rates
     groups = [
-        {"params": [parameters.diffuse], "lr": rates.stage3_diffuse},
-        {"params": [parameters.specular], "lr": rates.stage3_specular},
-        {"params": [parameters.roughness], "lr": rates.stage3_roughness},
+        {"params": parameters.diffuse.parameters(), "lr": rates.stage3_diffuse},
+        {"params": parameters.specular.parameters(), "lr": rates.stage3_specular},
+        {"params": parameters.roughness.parameters(), "lr": rates.stage3_roughness},
         {"params": [context.scene.lights], "lr": rates.stage3_lights},
     ]
     if context.decoupling.light_field is not None:

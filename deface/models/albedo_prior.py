@@ -28,11 +28,10 @@ from functools import lru_cache
 
 import numpy as np
 from scipy import ndimage
-from skimage.draw import polygon as draw_polygon
 
 from deface.models.base import AlbedoModel
 from deface.models.skin_tone import SkinToneAxis
-from deface.models.uvmap import coverage, fill_outside, rasterize_uv, texel_centres
+from deface.models.uvmap import coverage, fill_outside, polygon_mask, rasterize_uv, texel_centres
 
 # Jensen et al. 2001, Table 1, total diffuse reflectance Rd (R, G, B) of two skin samples.
 JENSEN2001_SKIN1_RD = (0.44, 0.22, 0.13)
@@ -120,14 +119,6 @@ def _to_pixels(uv: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     return (1.0 - uv[:, 1]) * size - 0.5, uv[:, 0] * size - 0.5
 
 
-def _polygon_mask(uv: np.ndarray, size: int) -> np.ndarray:
-    rows, cols = _to_pixels(uv, size)
-    mask = np.zeros((size, size))
-    rr, cc = draw_polygon(rows, cols, shape=(size, size))
-    mask[rr, cc] = 1.0
-    return mask
-
-
 def _ellipse_mask(centre_uv, radii_uv, size: int) -> np.ndarray:
     u, v = texel_centres(size, size)
     du = (u[None, :] - centre_uv[0]) / radii_uv[0]
@@ -173,7 +164,7 @@ def region_masks(layout: _Layout, config: AlbedoPriorConfig) -> dict[str, np.nda
     x, y, z = layout.position[..., 0], layout.position[..., 1], layout.position[..., 2]
     u, v = texel_centres(size, size)
     masks: dict[str, np.ndarray] = {}
-    masks["lips"] = _polygon_mask(lm[48:60], size)
+    masks["lips"] = polygon_mask(lm[48:60], size)
     brow_height = 0.25 * (lm[37:39, 1].mean() - lm[19, 1])  # brow landmarks sit on the brow's upper half
     brows = [lm[17:22] + [0.0, brow_height], lm[22:27] + [0.0, brow_height]]
     masks["brows"] = np.maximum(*[_polyline_band(b, 0.018, size) for b in brows])
@@ -210,7 +201,7 @@ def region_masks(layout: _Layout, config: AlbedoPriorConfig) -> dict[str, np.nda
     brow_top = lm[17:27, 1].max() + 0.02
     central = _smoothstep((0.3 - np.abs(u - 0.5)) / 0.1)[None, :]  # forehead between the temples
     forehead = _smoothstep((v[:, None] - brow_top) / 0.05) * central
-    nose = _polygon_mask(lm[[27, 31, 33, 35]] + [[0.0, 0.0], [-0.01, 0.0], [0.0, -0.0], [0.01, 0.0]], size)
+    nose = polygon_mask(lm[[27, 31, 33, 35]] + [[0.0, 0.0], [-0.01, 0.0], [0.0, -0.0], [0.01, 0.0]], size)
     nose = np.maximum(nose, _polyline_band(lm[27:31], 0.03, size))
     masks["tzone"] = np.maximum(forehead, nose)
     for key, mask in masks.items():

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
+from skimage.draw import polygon as draw_polygon
 
 # Candidate texels are evaluated in chunks of at most this many (triangle, texel) pairs (memory bound).
 _CHUNK_PAIRS = 4_000_000
@@ -118,3 +119,12 @@ def coverage(uvs: np.ndarray, triangle_uvs: np.ndarray, size: int, supersample: 
     """Fraction [size, size] in [0, 1] of each texel covered by the layout (supersampled, box-averaged)."""
     fine = rasterize_uv(uvs, triangle_uvs, size * supersample).covered.astype(np.float32)
     return fine.reshape(size, supersample, size, supersample).mean((1, 3))
+
+
+def polygon_mask(uv: np.ndarray, size: int) -> np.ndarray:
+    """[size, size] float map, 1 at texels inside the polygon of UV points [N, 2] (row 0 = v 1)."""
+    rows, cols = (1.0 - uv[:, 1]) * size - 0.5, uv[:, 0] * size - 0.5
+    mask = np.zeros((size, size))
+    rr, cc = draw_polygon(rows, cols, shape=(size, size))
+    mask[rr, cc] = 1.0
+    return mask

@@ -1,0 +1,56 @@
+"""Measures of textures in UV space, where users see them (Blender, game engines, datasets).
+
+- **UV consistency**: the same person and pose fitted from a shadowed photo and from the clean one should give
+  the same diffuse texture. PSNR / SSIM / LPIPS (:func:`deface.eval.metrics.score_images`, "face" region)
+  between the two sRGB-encoded diffuse maps over the texels both fits saw well: ``seen`` >= :data:`SEEN` in both
+  (visible x face region h x cos of the viewing angle, :meth:`deface.texture.confidence.TexelView.seen`; it
+  depends on the pose, not on the method, so every method is scored on the same texels).
+- **Speckle**: high-frequency energy of the diffuse map beyond what the photo shows at that scale. For a map X
+  the relative detail is hf(X) = (X - G(X)) / G(X), G a Gaussian of sigma :data:`SPECKLE_SIGMA` texels taken
+  within the region (normalised convolution); E(X) is the mean over the region of sum_c hf(X)_c². The photo,
+  read at each texel's pixel (:func:`deface.texture.confidence.unwrap`), gives the detail that is really there;
+  speckle = 100 x sqrt(max(0, E(texture) - E(photo))), in percent of local contrast. Region: texels seen
+  >= :data:`SEEN`, eroded by 2 texels (the region's border is not detail).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from deface.eval.metrics import score_images
+
+SEEN = 0.5  # seen at least this squarely (within 60 degrees, inside h) by a fit
+SPECKLE_SIGMA = 1.0  # texels: the scale of per-texel noise
+MIN_TEXELS = 64  # fewer texels in a region than this: no score
+
+
+def both_seen(seen_a: np.ndarray, seen_b: np.ndarray) -> np.ndarray:
+    """bool [Ht, Wt]: texels both fits saw at least :data:`SEEN`."""
+    return (seen_a >= SEEN) & (seen_b >= SEEN)
+
+
+def uv_consistency(diffuse_a: np.ndarray, diffuse_b: np.ndarray, region: np.ndarray) -> dict[str, float] | None:
+    """{"psnr", "ssim", "lpips"} of two sRGB diffuse maps [Ht, Wt, 3] over ``region`` (bool [Ht, Wt])."""
+    if region.sum() < MIN_TEXELS:
+        return None
+    return score_images(diffuse_a, diffuse_b, region.astype(np.float32))["face"]
+
+
+def relative_detail_energy(image: np.ndarray, region: np.ndarray, sigma: float = SPECKLE_SIGMA) -> float:
+    """E(X): mean over ``region`` of sum_c ((X - G X) / G X)², G a Gaussian taken within the region."""
+    weight = region.astype(np.float64)
+    blurred_weight = ndimage.gaussian_filter(weight, sigma)
+    energy = np.zeros(image.shape[:2])
+    for channel in range(image.shape[-1]):
+        values = image[..., channel].astype(np.float64) * weight
+        local = ndimage.gaussian_filter(values, sigma) / np.maximum(blurred_weight, 1e-6)
+        energy += ((image[..., channel] - local) / np.maximum(local, 1e-3)) ** 2
+    inner = ndimage.binary_erosion(region, iterations=2)
+    return float(energy[inner].mean()) if inner.sum() >= MIN_TEXELS else float("nan")
+
+
+def speckle(diffuse_linear: np.ndarray, photo_in_uv: np.ndarray, region: np.ndarray) -> float:
+    """Excess relative detail of a linear diffuse map over the photo read in UV (both [Ht, Wt, 3]), x100."""
+    excess = relative_detail_energy(diffuse_linear, region) - relative_detail_energy(photo_in_uv, region)
+    return float(100.0 * np.sqrt(max(excess, 0.0))) if np.isfinite(excess) else float("nan")

@@ -1,0 +1,64 @@
+"""What the fitted frames tell about each texel: per-frame texel views and the texture confidence map.
+
+Per frame, the pixel weight of the confidence (:mod:`deface.texture.confidence`) is the face region M_o times
+the unshadowed fraction of the light: sum_k M_k Y(I_k) / max_k Y(I_k) over the kept lights k (Y: luminance of
+the per-light render I_k, the albedo cancels), 1 where the brightest light reaches the pixel, the shadow light's
+share where the masks put a cast shadow. The geometric ``seen`` factor (visible x h x facing, no resolution,
+no shadow) is what the evaluation's UV measure selects texels with: it does not depend on the method.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from deface.io.images import LUMINANCE
+from deface.models.uvmap import rasterize_uv
+from deface.render.mesh import Textures
+from deface.texture.completion import CompletionConfig, complete_map, layout_regions
+from deface.texture.confidence import TexelView, combine_frames, texel_view
+
+LUMINANCE_T = torch.as_tensor(LUMINANCE, dtype=torch.float32)
+
+def frame_views(model, frozen: list, size: int) -> list[TexelView]:
+    """The texel view of each frozen frame's working-resolution camera for a size² map of ``model``'s layout."""
+    raster = rasterize_uv(model.uvs, model.triangle_uvs, size)
+    return [texel_view(raster, frame.geometry.mesh, frame.geometry.camera) for frame in frozen]
+
+
+def unshadowed_fraction(light_images: torch.Tensor, light_masks: torch.Tensor) -> np.ndarray:
+    """[H, W] in [0, 1]: sum_k M_k Y(I_k) / max_k Y(I_k); light_images [K, H, W, 3], light_masks [K, H, W]."""
+    luminance = light_images.detach() @ LUMINANCE_T.to(light_images.dtype)  # [K, H, W]
+    brightest = luminance.max(0).values
+    reached = (luminance * light_masks.detach()).sum(0)
+    fraction = torch.where(brightest > 1e-6, reached / brightest.clamp_min(1e-6), torch.zeros_like(brightest))
+    return fraction.clamp(0, 1).numpy()
+
+
+def texture_confidence(views: list[TexelView], renders: list) -> np.ndarray:
+    """[Ht, Wt] confidence over all frames; ``renders`` are the frames' FrameRender (M_o, masks, I_k)."""
+    per_frame = []
+    for view, rendered in zip(views, renders, strict=True):
+        weight = rendered.face_region.detach().numpy() * unshadowed_fraction(rendered.light_images,
+                                                                               rendered.light_masks)
+        per_frame.append(view.confidence(weight))
+    return combine_frames(per_frame)
+
+
+def seen_texels(views: list[TexelView], face_regions: list[torch.Tensor]) -> np.ndarray:
+    """[Ht, Wt] in [0, 1]: how squarely some frame saw each texel inside its face region h (no resolution term)."""
+    looks = [view.seen(region.detach().numpy()) for view, region in zip(views, face_regions, strict=True)]
+    return np.max(np.stack(looks), 0)
+
+
+def complete_textures(model, textures: Textures, initial: Textures, seen_map: np.ndarray,
+                      config: CompletionConfig) -> Textures:
+    """Stage 3's maps with the unseen texels completed (deface/texture/completion.py)."""
+    regions = layout_regions(model, seen_map.shape[0])
+    maps = {}
+    for name in ("diffuse", "specular", "roughness"):
+        fitted, prior = getattr(textures, name).detach().numpy(), getattr(initial, name).detach().numpy()
+        maps[name] = torch.from_numpy(complete_map(fitted, prior, seen_map, regions, config,
+                                                   cavity=name == "diffuse"))
+    maps["roughness"] = maps["roughness"].clamp_min(0.05)  # stage 3's roughness range
+    return Textures(**maps)

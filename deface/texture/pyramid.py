@@ -1,0 +1,82 @@
+"""A texture whose degrees of freedom match what the photos constrain: a gated Laplacian-style pyramid.
+
+Stage 3 refines the UV maps from T^0. Stored per texel, every texel is free, including the ones a photo pixel
+shares with three others (2 texels per pixel side) or sees at a grazing angle: the photometric loss does not
+see their differences, Adam still steps each of them by about its learning rate, and the map fills with
+per-texel colour noise (speckle). Here a map is
+
+    T = T^0 + sum_l up(g_l * P_l),     level l of side N / 2^l, up = bilinear upsampling to N,
+
+with gate g_l = clip(D_l, 0, 1), D_l the pixels per level-l texel (the frames' texel density summed over
+frames, :attr:`deface.texture.confidence.TexelView.density`, pooled to the level and times 4^l). A level is
+free where the photos give it at least a pixel per texel and damped in proportion where they give less, so
+the detail a photo shows (stubble, moles, wrinkles at its resolution) is fitted at the finest level it
+supports and nothing finer. The coarsest level is always free (gate 1). With ``levels = 1`` the map is the
+per-texel parametrisation of the paper.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+
+@dataclass(frozen=True)
+class PyramidConfig:
+    """The stage-3 texture parametrisation (``FitConfig.texture_pyramid``)."""
+
+    levels: int = 1
+    """Pyramid levels (1 = one free value per texel, the paper's parametrisation; the deface preset uses 5)."""
+    min_side: int = 16
+    """No level is coarser than this many texels per side (fewer levels on small maps)."""
+    gated: bool = True
+    """Damp each level where the photos give less than a pixel per texel of that level (see the module doc)."""
+
+
+def level_sizes(size: int, config: PyramidConfig) -> list[int]:
+    """Sides of the levels, finest first: size, size/2, ... (at least one level, none below min_side)."""
+    sizes = [size]
+    while len(sizes) < config.levels and sizes[-1] // 2 >= config.min_side and sizes[-1] % 2 == 0:
+        sizes.append(sizes[-1] // 2)
+    return sizes
+
+
+def level_gates(density: np.ndarray, sizes: list[int], gated: bool = True) -> list[torch.Tensor]:
+    """[s, s] gate per level: clip(pixels per level texel, 0, 1); the coarsest level (and every level when
+    not ``gated``) is 1. ``density`` [N, N] is pixels per texel at the finest level."""
+    full = torch.as_tensor(np.asarray(density), dtype=torch.float32)[None, None]
+    gates = []
+    for index, side in enumerate(sizes):
+        if not gated or index == len(sizes) - 1:
+            gates.append(torch.ones(side, side))
+            continue
+        factor = sizes[0] // side
+        per_level_texel = F.avg_pool2d(full, factor)[0, 0] * factor**2 if factor > 1 else full[0, 0]
+        gates.append(per_level_texel.clamp(0, 1))
+    return gates
+
+
+class TexturePyramid(torch.nn.Module):
+    """One UV map [N, N, C] as T^0 plus gated levels (see the module doc); starts at T^0 exactly."""
+
+    def __init__(self, initial: torch.Tensor, gates: list[torch.Tensor]):
+        super().__init__()
+        self.register_buffer("initial", initial.detach().clone())  # [N, N, C]
+        channels = initial.shape[-1]
+        self.levels = torch.nn.ParameterList(
+            [torch.nn.Parameter(torch.zeros(channels, *gate.shape)) for gate in gates])  # [C, s, s]
+        for index, gate in enumerate(gates):
+            self.register_buffer(f"gate{index}", gate.detach().clone())
+
+    def forward(self) -> torch.Tensor:
+        size = self.initial.shape[:2]
+        total = torch.zeros_like(self.initial).permute(2, 0, 1)  # [C, N, N]
+        for index, level in enumerate(self.levels):
+            gated = level * getattr(self, f"gate{index}")
+            if gated.shape[-2:] != size:
+                gated = F.interpolate(gated[None], size=size, mode="bilinear", align_corners=False)[0]
+            total = total + gated
+        return self.initial + total.permute(1, 2, 0)
