@@ -173,7 +173,7 @@ def test_a_second_writer_of_the_same_output_skips_it(photo, tmp_path, fake_fit):
     assert "0 of 1 input(s) done, 0 failed, 1 left to another run" in lines[-1]
     code, lines = _fit(photo, "-o", out)  # the lock is gone with its holder
     assert code == 0 and (out / "face" / "params.json").is_file()
-    assert sorted(p.name for p in out.iterdir()) == ["face"]
+    assert sorted(p.name for p in out.iterdir()) == ["face", "index.html"]
 
 
 def test_two_processes_writing_the_same_output(photo, tmp_path):

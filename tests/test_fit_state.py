@@ -235,3 +235,4 @@ def test_batch_index_links_each_report(photos, tmp_path, written):
     shutil.copytree(written, tmp_path / "a")
     index = write_index(tmp_path, ["a", "missing"]).read_text()
     assert 'href="a/report.html"' in index and "missing" not in index
+    assert write_index(tmp_path, ["missing"]) is None

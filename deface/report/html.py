@@ -176,8 +176,9 @@ def _flat(values: dict, prefix: str = "") -> dict:
     return flat
 
 
-def write_index(output: Path, names: list[str]) -> Path:
-    """``output/index.html``: one row per input folder that has a report (its I_out and a link)."""
+def write_index(output: Path, names: list[str]) -> Path | None:
+    """``output/index.html``: one entry per input folder that has a report (its I_out and a link); nothing
+    (None) when no input has one."""
     rows = []
     for name in names:
         folder = output / name
@@ -186,6 +187,8 @@ def write_index(output: Path, names: list[str]) -> Path:
         thumb = f"{name}/render.png" if (folder / "render.png").is_file() else f"{name}/frames/000/render.png"
         rows.append(f'<figure><a href="{html.escape(name)}/report.html"><img src="{html.escape(thumb)}" '
                     f'height="160"></a><figcaption>{html.escape(name)}</figcaption></figure>')
+    if not rows:
+        return None
     page = (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>deface fits</title>{STYLE}'
             f'</head>\n<body><h1>deface fits ({len(rows)})</h1><div class="row">{"".join(rows)}</div>\n'
             f"{CHECK_SCRIPT}\n</body></html>\n")
