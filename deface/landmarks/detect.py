@@ -14,6 +14,7 @@ border (the face then looks smaller and further away) and upscaled to at least 3
 from __future__ import annotations
 
 from collections.abc import Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,7 +65,10 @@ class FaceMeshDetector:
 
     def __init__(self, static: bool = True, max_faces: int = 4, min_confidence: float = 0.5):
         quiet_environment()
-        with native_log_filter():
+        # MediaPipe's threads print C++ notices until the graph is closed: filter for the detector's lifetime.
+        self._quiet = ExitStack()
+        self._quiet.enter_context(native_log_filter())
+        try:
             from mediapipe.python.solutions import face_mesh
 
             self.static = static
@@ -75,6 +79,9 @@ class FaceMeshDetector:
                 min_detection_confidence=min_confidence,
                 min_tracking_confidence=min_confidence,
             )
+        except BaseException:
+            self._quiet.close()
+            raise
 
     def __enter__(self) -> FaceMeshDetector:
         return self
@@ -83,14 +90,15 @@ class FaceMeshDetector:
         self.close()
 
     def close(self) -> None:
-        with native_log_filter():
+        try:
             self._mesh.close()
+        finally:
+            self._quiet.close()
 
     def raw_faces(self, image: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Run MediaPipe once on uint8 [H, W, 3] -> [(points [478, 2], depth [478])] in MediaPipe's order."""
         height, width = image.shape[:2]
-        with native_log_filter():  # MediaPipe's C++ notices (deface/landmarks/quiet.py)
-            result = self._mesh.process(image)
+        result = self._mesh.process(image)
         faces = []
         for face in result.multi_face_landmarks or []:
             xyz = np.array([(p.x, p.y, p.z) for p in face.landmark], dtype=np.float32)  # [478, 3]
