@@ -227,6 +227,17 @@ def test_report_renders_in_chromium_with_every_image_and_no_console_message(writ
         assert (written / part).is_file(), part
 
 
+def test_report_command_rewrites_the_report_of_a_loaded_fit(written, tmp_path):
+    import shutil
+
+    shutil.copytree(written, tmp_path / "copy")
+    (tmp_path / "copy" / "report.html").unlink()
+    result = CliRunner().invoke(app, ["report", str(tmp_path / "copy")])
+    assert result.exit_code == 0, result.output
+    page = (tmp_path / "copy" / "report.html").read_text()
+    assert "report/losses.png" in page and "textures/diffuse.png" in page
+
+
 def test_batch_index_links_each_report(photos, tmp_path, written):
     import shutil
 

@@ -1,4 +1,5 @@
-"""`deface relight`, `deface turntable`, `deface transfer`: re-using finished fits (deface/relight)."""
+"""`deface relight`, `deface turntable`, `deface transfer`, `deface report`: re-using finished fits (loaded with
+deface.export.load.load_fit; deface/relight, deface/report)."""
 
 from __future__ import annotations
 
@@ -19,6 +20,18 @@ def register(app: typer.Typer) -> None:
     app.command("relight")(relight_command)
     app.command("turntable")(turntable_command)
     app.command("transfer")(transfer_command)
+    app.command("report")(report_command)
+
+
+def report_command(
+    fit: Path = typer.Argument(..., help="A fit's output folder."),
+    models: Path | None = typer.Option(None, "--models", help="Model files folder."),
+) -> None:
+    """Load a fit and (re)write its report.html (deface fit writes one for every fit)."""
+    from deface.report.html import write_report
+
+    loaded = _load(fit, models)
+    console.print(f"{fit}: {write_report(loaded, fit, fit.name)}")
 
 
 def relight_command(
