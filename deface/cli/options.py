@@ -32,6 +32,7 @@ class Range:
 # several GB and hours. Lights and bands: each light adds a render per step, each band 2B+1 coefficients.
 RANGES = {
     "--resolution": Range(32, 2048, "a number of pixels (longest side of the working image)"),
+    "--texture-size": Range(16, 4096, "a number of texels (side of the UV maps)"),
     "--lights": Range(1, 16, "a number of light conditions"),
     "--bands": Range(1, 16, "a number of SH bands"),
     "--max-frames": Range(1, 256, "a number of frames"),

@@ -158,7 +158,9 @@ def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
 def _mean_uv(uv: list[dict]) -> dict:
     """Means over pairs of the UV consistency scores and the speckle (deface/eval/uv_measure.py)."""
     mean = {key: sum(item["consistency"][key] for item in uv) / len(uv) for key in ("psnr", "ssim", "lpips")}
-    mean["speckle"] = sum(item["speckle"] for item in uv) / len(uv)
+    for key in ("speckle", "detail"):
+        values = [item[key] for item in uv if key in item]
+        mean[key] = sum(values) / len(values) if len(values) == len(uv) else None
     return mean
 
 
@@ -190,13 +192,14 @@ def _row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair])
 def _uv_row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair]) -> str:
     timing_path = out_dir / name / "timing.json"
     if not timing_path.exists() or not _fitted_now(out_dir, name, schedule, pairs):
-        return f"| {label} | not run with the current configuration | | | | |"
+        return f"| {label} | not run with the current configuration | | | | | |"
     uv = json.loads(timing_path.read_text()).get("uv")
     if uv is None:
-        return f"| {label} | not measured (cached pairs predate the UV measure) | | | | |"
+        return f"| {label} | not measured (cached pairs predate the UV measure) | | | | | |"
     synthesis = json.loads((out_dir / name / "metrics.json").read_text())["mean"]["target"]["face"]["psnr"]
+    detail = f"{uv['detail']:.2f}" if uv.get("detail") is not None else "-"
     return (f"| {label} | {uv['psnr']:.2f} | {uv['ssim']:.3f} | {uv['lpips']:.2f} | {uv['speckle']:.2f}"
-            f" | {synthesis:.2f} |")
+            f" | {detail} | {synthesis:.2f} |")
 
 
 def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str, limit: int | None = None) -> str:
@@ -230,9 +233,10 @@ def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str,
         f"### {UV_TABLE[0]}", "",
         "UV PSNR / SSIM / LPIPS x100: the source fit's diffuse map against the target fit's (same person and pose,"
         " shadowed vs clean photo), over the texels both fits saw within 60 degrees inside h; speckle: the maps'"
-        " high-frequency contrast beyond the photo's at that scale, % (0 = none; docs/textures.md);"
+        " high-frequency contrast beyond the photo's at that scale, % (0 = none); detail: the maps' fine contrast"
+        " as a share of the photo's (1 = all of it; docs/textures.md);"
         " synthesis = target synthesis PSNR face, as above.", "",
-        "| | UV PSNR | UV SSIM | UV LPIPS | speckle | synthesis PSNR face |\n|---|---|---|---|---|---|",
+        "| | UV PSNR | UV SSIM | UV LPIPS | speckle | detail | synthesis PSNR face |\n|---|---|---|---|---|---|---|",
         *[_uv_row(out_dir, label, name, schedule, pairs) for label, name in UV_TABLE[1]], ""]
     lines.append(f"_Written {time.strftime('%Y-%m-%d %H:%M')}._")
     return "\n".join(lines) + "\n"

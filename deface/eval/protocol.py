@@ -19,7 +19,7 @@ from deface.eval import identity
 from deface.eval.metrics import composite, mean_scores, score_images
 from deface.eval.pairs import Pair
 from deface.eval.report import PairScores, ReportRow
-from deface.eval.uv_measure import SEEN, both_seen, speckle, uv_consistency
+from deface.eval.uv_measure import SEEN, both_seen, detail_ratio, speckle, uv_consistency
 from deface.export.files import save_png
 from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
@@ -93,16 +93,19 @@ def uv_scores(source: FitOutput, target: FitOutput) -> dict:
     """The two fits' diffuse maps compared in UV space, and their speckle (mean of both fits)."""
     region = both_seen(source.seen, target.seen)
     srgb = [linear_to_srgb(_np(fit.textures.diffuse).clip(0, 1)) for fit in (source, target)]
+    details = [fit_detail(fit) for fit in (source, target)]
     return {"consistency": uv_consistency(*srgb, region), "texels": int(region.sum()),
-            "speckle": float(np.mean([fit_speckle(fit) for fit in (source, target)]))}
+            "speckle": float(np.mean([d["speckle"] for d in details])),
+            "detail": float(np.mean([d["detail"] for d in details]))}
 
 
-def fit_speckle(result: FitOutput) -> float:
-    """Speckle of a fit's diffuse map against its first frame read in UV, over the texels that frame saw."""
+def fit_detail(result: FitOutput) -> dict[str, float]:
+    """Speckle and detail ratio of a fit's diffuse map against its first frame read in UV, over the texels
+    that frame saw (deface/eval/uv_measure.py)."""
     view = result.views[0]
     region = view.seen(_np(result.frames[0].face_region)) >= SEEN
-    photo = unwrap(result.frames[0].photo.numpy(), view)
-    return speckle(_np(result.textures.diffuse), photo, region)
+    photo, diffuse = unwrap(result.frames[0].photo.numpy(), view), _np(result.textures.diffuse)
+    return {"speckle": speckle(diffuse, photo, region), "detail": detail_ratio(diffuse, photo, region)}
 
 
 def _albedo_ita(result: FitOutput) -> float:
@@ -117,6 +120,7 @@ def _save_images(folder: Path, source: FitOutput, target: FitOutput, source_out,
         "source reconstruction": (source_out, True),
         "target synthesis": (swap_out, True),
         "diffuse (source)": (_np(source.textures.diffuse), True),
+        "diffuse (target)": (_np(target.textures.diffuse), True),
         "specular (source)": (_np(source.textures.specular), False),
         "roughness (source)": (_np(source.textures.roughness), False),
     }

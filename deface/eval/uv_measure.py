@@ -11,6 +11,8 @@
   read at each texel's pixel (:func:`deface.texture.confidence.unwrap`), gives the detail that is really there;
   speckle = 100 x sqrt(max(0, E(texture) - E(photo))), in percent of local contrast. Region: texels seen
   >= :data:`SEEN`, eroded by 2 texels (the region's border is not detail).
+- **Detail**: sqrt(E(texture) / E(photo)), the map's fine contrast as a share of the photo's: 1 keeps all of
+  it, well below 1 is the prior with a faint layer of the person's detail (stubble, brows, wrinkles).
 """
 
 from __future__ import annotations
@@ -54,3 +56,10 @@ def speckle(diffuse_linear: np.ndarray, photo_in_uv: np.ndarray, region: np.ndar
     """Excess relative detail of a linear diffuse map over the photo read in UV (both [Ht, Wt, 3]), x100."""
     excess = relative_detail_energy(diffuse_linear, region) - relative_detail_energy(photo_in_uv, region)
     return float(100.0 * np.sqrt(max(excess, 0.0))) if np.isfinite(excess) else float("nan")
+
+
+def detail_ratio(diffuse_linear: np.ndarray, photo_in_uv: np.ndarray, region: np.ndarray) -> float:
+    """sqrt(E(map) / E(photo)): the map's fine relative contrast as a share of the photo's at that scale."""
+    photo = relative_detail_energy(photo_in_uv, region)
+    ratio = relative_detail_energy(diffuse_linear, region) / photo if photo > 0 else float("nan")
+    return float(np.sqrt(ratio)) if np.isfinite(ratio) else float("nan")

@@ -55,7 +55,7 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
                        params.get("optional_networks", {}))
     views = tuple(frame_views(model, frames, textures.diffuse.shape[0]))
     seen, confidence = (arrays[name].astype(np.float32) if name in arrays else None
-                        for name in ("texture_seen", "texture_confidence"))
+                        for name in ("texture_seen", "confidence"))
     return FitOutput(model, config, tuple(frames), pose.identity, pose.expression, pose.rotation,
                      pose.translation, pose.focal, _tensor(arrays["albedo"]), _tone(params),
                      _tensor(arrays["lights"]), tuple(int(k) for k in arrays["kept"]), textures, None,

@@ -136,7 +136,7 @@ def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
     if result.seen is not None:
         arrays["texture_seen"] = result.seen.astype(np.float16)
     if result.confidence is not None:
-        arrays["texture_confidence"] = result.confidence.astype(np.float16)
+        arrays["confidence"] = result.confidence.astype(np.float16)
     if frames[0].transfer is not None:
         arrays["transfer_occluded"] = np.stack([_np(frame.transfer.occluded) for frame in frames])
         arrays["transfer_visibility"] = np.stack([_np(frame.transfer.visibility) for frame in frames])
