@@ -21,6 +21,7 @@ from deface.fit.config import override
 from deface.fit.log import FitLog
 from deface.fit.stage2 import _stage2_loss
 from deface.fit.target import FitTarget
+from deface.fit.texels import frame_views
 from deface.io.images import load_image
 from deface.paths import shared_dir
 
@@ -61,8 +62,11 @@ def _stage2_step(context):
 
 def _stage3_step(context):
     initial = stage3.initial_textures(context)
-    parameters = stage3.TextureParameters(initial)
-    loss_of = stage3.objective(context, stage3.freeze_frames(context, initial), initial)
+    frozen = stage3.freeze_frames(context, initial)
+    size = initial.diffuse.shape[0]
+    views = frame_views(context.model, frozen, size)
+    parameters = stage3.TextureParameters(initial, stage3.texture_gates(context, views, size))
+    loss_of = stage3.objective(context, frozen, initial)
     return lambda: loss_of(parameters.textures()).backward()
 
 
