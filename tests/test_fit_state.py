@@ -58,6 +58,26 @@ def test_stage_results_carry_named_terms_that_sum_to_the_total(state):
     assert {"texture_regularisers", "local_prior"} <= set().union(*state.stage3.terms)
 
 
+def test_a_stage_runs_alone_from_the_prepared_state(shared):
+    """Stage 2 as a runner: the prepared context in, its result out; only the trainable parameters change."""
+    import dataclasses
+
+    from deface.fit.pipeline import prepare
+    from deface.fit.stage2 import run_stage2
+
+    face = make_shadowed_face(load_face_model("ict"), size=48, seed=1, rays=8)
+    config = override(presets.get("default"), **{**SCHEDULES["smoke"], "iterations.stage2": 6,
+                                                   "decouple.ace_iteration": 3})
+    context, optional = prepare(FitTarget([face.image_srgb], [face.landmarks], 1.0), config)
+    assert "face_parsing" in optional and dataclasses.is_dataclass(context) and len(context.inputs.face_classifier) == 1
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        context.config = config
+    before = context.scene.lights.detach().clone()
+    result = run_stage2(context)
+    assert len(result.history) == len(result.terms) == 6 and result.kept == context.decoupling.kept
+    assert not torch.equal(before, context.scene.lights)
+
+
 def test_loss_log_has_a_column_per_term(written):
     rows = list(csv.DictReader((written / "loss_log.csv").open()))
     assert {"stage", "step", "loss", "photometric", "landmarks", "texture_regularisers"} <= set(rows[0])
