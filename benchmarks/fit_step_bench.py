@@ -39,7 +39,7 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     config = override(presets.get("default"), resolution=args.resolution)
     if args.supersampling:
-        config = override(config, supersampling=args.supersampling)
+        config = override(config, **{"render.supersampling": args.supersampling})
     log = FitLog(quiet=True)
     work, landmarks, scale, _ = pipeline.detect([load_image(args.photo)], config, str(args.photo), False)
     context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=log)
@@ -51,7 +51,8 @@ def main() -> None:
         step()
         walls.append(time.perf_counter() - wall)
         cpus.append(time.thread_time() - cpu)
-    detail = f", {config.supersampling}x{config.supersampling} samples per pixel" if args.stage == 3 else ""
+    samples = config.render.supersampling
+    detail = f", {samples}x{samples} samples per pixel" if args.stage == 3 else ""
     print(f"{args.resolution}² stage-{args.stage} step, {config.lights.num_lights} lights{detail}: wall median "
           f"{statistics.median(walls) * 1000:.0f} ms, thread CPU median {statistics.median(cpus) * 1000:.0f} ms")
 

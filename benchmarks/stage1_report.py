@@ -20,7 +20,8 @@ import torch
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from deface.fit.stage1 import Stage1Config, Stage1Result, fit_landmarks  # noqa: E402
+from deface.fit.config import Iterations, Stage1Config  # noqa: E402
+from deface.fit.stage1 import Stage1Result, fit_landmarks  # noqa: E402
 from deface.io import list_inputs, load_image  # noqa: E402
 from deface.landmarks import correspondence_for  # noqa: E402
 from deface.landmarks.detect import FaceMeshDetector, Landmarks, NoFaceError  # noqa: E402
@@ -65,7 +66,7 @@ def main() -> None:
     parser.add_argument("output", type=Path, help="folder for the overlays")
     default_images = (shared_dir() / "data" / "images") if shared_dir() else None
     parser.add_argument("--images", type=Path, default=default_images, help="folder of photos")
-    parser.add_argument("--iterations", type=int, default=Stage1Config.iterations)
+    parser.add_argument("--iterations", type=int, default=Iterations.stage1)
     args = parser.parse_args()
     if args.images is None:
         parser.error("--images is required when ../shared is absent")
@@ -78,8 +79,8 @@ def main() -> None:
     args.output.mkdir(parents=True, exist_ok=True)
     model = load_ict()
     corr = correspondence_for(model)
-    config = Stage1Config(iterations=args.iterations)
-    print(f"model {model.name}, {len(corr)} landmark correspondences, {config.iterations} Adam steps")
+    config = Stage1Config()
+    print(f"model {model.name}, {len(corr)} landmark correspondences, {args.iterations} Adam steps")
     print(
         "| image | faces found | face | error % IOD | error % frontal IOD | residual px | IOD px "
         "| detect s | stage 1 s |"
@@ -101,7 +102,7 @@ def main() -> None:
             continue
         for landmarks in faces:
             start = time.perf_counter()
-            result = fit_landmarks(model, corr, [landmarks], landmarks.image_size, config)
+            result = fit_landmarks(model, corr, [landmarks], landmarks.image_size, config, args.iterations)
             fit_s = time.perf_counter() - start
             error = 100 * float(result.error_iod[0])
             frontal = 100 * float(result.error_iod_frontal[0])

@@ -24,7 +24,7 @@ from deface.models import load_face_model
 from deface.render.mesh import sample_texture
 
 SHORT = {"iterations.stage1": 100, "iterations.stage2": 120, "iterations.stage3": 60,
-         "decouple.ace_iteration": 40, "resolution": 96, "texture_size": 128, "shadow_rays": 64}
+         "decouple.ace_iteration": 40, "resolution": 96, "texture_size": 128, "render.shadow_rays": 64}
 
 
 def diffuse_error(face, diffuse: torch.Tensor, region) -> float:

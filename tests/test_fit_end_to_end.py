@@ -21,7 +21,7 @@ from deface.models import load_face_model
 from deface.render.mesh import sample_texture
 
 SHORT = {"iterations.stage1": 100, "iterations.stage2": 120, "iterations.stage3": 60,
-         "decouple.ace_iteration": 40, "resolution": 96, "texture_size": 128, "shadow_rays": 64}
+         "decouple.ace_iteration": 40, "resolution": 96, "texture_size": 128, "render.shadow_rays": 64}
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +64,7 @@ def test_decoupling_keeps_cast_shadow_out_of_texture(shadowed_face):
 
 def test_fits_are_deterministic_for_a_seed(shadowed_face):
     short = {**SHORT, "iterations.stage1": 30, "iterations.stage2": 12, "iterations.stage3": 4,
-             "decouple.ace_iteration": 6, "resolution": 64, "texture_size": 64, "shadow_rays": 16}
+             "decouple.ace_iteration": 6, "resolution": 64, "texture_size": 64, "render.shadow_rays": 16}
     config = override(presets.get("default"), **short)
     small = [shadowed_face.image_srgb[::3, ::3].copy()]
     landmarks = shadowed_face.landmarks

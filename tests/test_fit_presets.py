@@ -46,4 +46,4 @@ def test_baselines_keep_the_model_mean_skin_and_free_lights():
 def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():
     for name in presets.names():
         config = presets.get(name)
-        assert config.supersampling == 2 and config.render_blur is False, name
+        assert config.render.supersampling == 2 and config.render.render_blur is False, name

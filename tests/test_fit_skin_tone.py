@@ -29,7 +29,7 @@ from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import RenderConfig, Renderer
 
 SHORT = {"iterations.stage1": 100, "iterations.stage2": 150, "iterations.stage3": 40,
-         "decouple.ace_iteration": 50, "resolution": 96, "texture_size": 128, "shadow_rays": 48}
+         "decouple.ace_iteration": 50, "resolution": 96, "texture_size": 128, "render.shadow_rays": 48}
 WALL = 0.18  # the room's grey: what the grey-world estimate assumes
 
 

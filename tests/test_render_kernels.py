@@ -1,4 +1,5 @@
-"""The numba kernels (fast CPU path) against the torch reference path: values and gradients, float64."""
+"""The renderer's ops (deface/render/kernels): every registered op's fast numba path against its torch
+reference, values and gradients in float64, on 1 and 2 threads; then the whole render on both paths."""
 
 from __future__ import annotations
 
@@ -9,17 +10,9 @@ from test_render_gradients import Loss
 
 from deface.render import kernels
 from deface.render.camera import Camera
-from deface.render.mesh import sample_texture
 from deface.render.primitives import uv_sphere
-from deface.render.renderer import (
-    RenderConfig,
-    Renderer,
-    _filtered_interpolation,
-    _pixel_rays,
-    _specular_bands,
-    vertex_irradiance,
-)
-from deface.render.sh import sh_basis_rows
+from deface.render.renderer import RenderConfig, Renderer, _pixel_rays, vertex_irradiance
+from deface.render.sh import cosine_lobe_coefficients
 
 pytestmark = pytest.mark.skipif(kernels.numba is None, reason="numba is not installed")
 
@@ -47,67 +40,210 @@ def values_and_grads(fn, inputs):
     return [out.detach(), *grads]
 
 
-def test_sh_basis_matches_reference_up_to_18_bands():
-    gen = torch.Generator().manual_seed(0)
-    dirs = torch.nn.functional.normalize(torch.randn(300, 3, generator=gen, dtype=torch.float64), dim=1)
-    dirs[0] = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)  # a pole
-    for bands in (1, 2, 9, 18):
-        assert_close(*both_paths(lambda b=bands: values_and_grads(lambda d: sh_basis_rows(d, b), [dirs])))
+# -- one case per registered op ---------------------------------------------------------------------
+class Case:
+    """Arguments of one call of an op; ``grads``: indices of the arguments to differentiate (float64)."""
+
+    def __init__(self, *args, grads=(), rtol=1e-10, atol=1e-12):
+        self.args, self.grads, self.rtol, self.atol = list(args), tuple(grads), rtol, atol
 
 
-def test_filtered_interpolation_matches_sparse_reference():
-    gen = torch.Generator().manual_seed(0)
+def _gen():
+    return torch.Generator().manual_seed(0)
+
+
+def _unit(rows: int, gen) -> torch.Tensor:
+    return torch.nn.functional.normalize(torch.randn(rows, 3, generator=gen, dtype=torch.float64), dim=1)
+
+
+def _interpolate_cases():
+    gen = _gen()
+    values = torch.randn(40, 6, generator=gen, dtype=torch.float64)
+    corners = torch.randint(0, 40, (300, 3), generator=gen)
+    return [Case(values, corners, torch.rand(300, 3, generator=gen, dtype=torch.float64), grads=(0, 2))]
+
+
+def _filtered_interpolation_cases():
+    gen = _gen()
     values = torch.randn(40, 4 * 6, generator=gen, dtype=torch.float64)  # U = 40, B = 4, C = 6
     corners = torch.randint(0, 40, (300, 3), generator=gen)
     bary = torch.rand(300, 3, generator=gen, dtype=torch.float64)
     lobe = torch.rand(300, 4, generator=gen, dtype=torch.float64)
-
-    def run():
-        return values_and_grads(lambda v, b, f: _filtered_interpolation(v, corners, b, f), [values, bary, lobe])
-
-    assert_close(*both_paths(run))
+    return [Case(values, corners, bary, lobe, grads=(0, 2, 3))]
 
 
-def test_specular_band_sums_match_reference_with_camera_gradients():
-    """Mirrored view directions and their band sums, with gradients to positions, normals and the camera pose."""
-    gen = torch.Generator().manual_seed(0)
+def _projected_scene():
+    """The gradient tests' scene: projected vertices, depths and the covered pixels of its camera."""
+    loss = Loss()
+    cam = loss.camera(loss.params)
+    fragments = loss.renderer.rasterize(loss.mesh, cam)
+    pixels, depth = cam.project(loss.mesh.vertices)
+    return loss, cam, fragments, pixels.detach(), depth.detach()
+
+
+def _barycentrics_cases():
+    loss, cam, fragments, pixels, depth = _projected_scene()
+    covered = (loss.mesh.triangles, fragments.covered_triangles, fragments.covered, (cam.height, cam.width))
+    return [Case(pixels, depth, covered, grads=(0, 1))]
+
+
+def _sh_basis_cases():
+    dirs = _unit(300, _gen())
+    dirs[0] = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)  # a pole
+    return [Case(dirs, bands, bands % 2 == 0, grads=(0,)) for bands in (1, 2, 9, 18)]
+
+
+def _sh_band_sums_cases():
+    gen = _gen()
+    return [Case(_unit(300, gen), torch.randn(16, 6, generator=gen, dtype=torch.float64), grads=(0, 1))]
+
+
+def _sh_irradiance_cases():
+    loss = Loss()
+    gen = _gen()
+    normals = loss.mesh.vertex_normals().detach()
+    coeffs = torch.randn(9, 6, generator=gen, dtype=torch.float64)
+    lobe = cosine_lobe_coefficients(3).double()
+    subset = torch.arange(0, normals.shape[0], 3)
+    return [
+        Case(normals, coeffs, lobe, None, None, grads=(0, 1)),
+        Case(normals, coeffs, lobe, loss.transfer, None, grads=(0, 1)),
+        Case(normals[subset], coeffs, lobe, loss.transfer, subset, grads=(0, 1)),
+    ]
+
+
+def _vertex_normals_cases():
+    mesh = Loss().mesh
+    return [Case(mesh.vertices, mesh.triangles, grads=(0,))]
+
+
+def _reflect_cases():
+    gen = _gen()
     positions = torch.randn(60, 3, generator=gen, dtype=torch.float64)
-    normals = torch.nn.functional.normalize(torch.randn(60, 3, generator=gen, dtype=torch.float64), dim=1)
-    coeffs = torch.randn(16, 6, generator=gen, dtype=torch.float64)
-    rotation = torch.tensor([3.0, 0.1, -0.2], dtype=torch.float64)
-    translation = torch.tensor([0.2, -0.1, 8.0], dtype=torch.float64)
-    focal = torch.tensor(30.0, dtype=torch.float64)
-
-    def bands(x, n, c, r, t):
-        return _specular_bands(x, n, Camera(focal, r, t, 32, 32), c, 4)
-
-    inputs = [positions, normals, coeffs, rotation, translation]
-    assert_close(*both_paths(lambda: values_and_grads(bands, inputs)))
+    centre = torch.tensor([0.2, -0.1, 8.0], dtype=torch.float64)
+    return [Case(positions, _unit(60, gen), centre, grads=(0, 1, 2))]
 
 
-def test_vertex_normals_match_reference():
-    loss = Loss()
-    mesh = loss.mesh
-
-    def normals(vertices):
-        return type(mesh)(vertices, mesh.triangles, mesh.uvs, mesh.triangle_uvs).vertex_normals()
-
-    assert_close(*both_paths(lambda: values_and_grads(normals, [mesh.vertices])))
-
-
-def test_primary_rays_only_in_triangle_boxes_find_the_same_triangles():
-    """Tracing only pixels inside some triangle's projected box misses no hit (same ids as the whole box)."""
-    loss = Loss()
-    for params in (loss.params, {**loss.params, "focal": torch.tensor(90.0, dtype=torch.float64)}):
-        fast, reference = both_paths(lambda p=params: [loss.renderer.rasterize(loss.mesh, loss.camera(p)).triangle_id])
-        assert torch.equal(fast[0], reference[0]) and bool((fast[0] >= 0).any())
-
-
-def test_bilinear_lookup_matches_grid_sample_inside_and_at_the_border():
-    gen = torch.Generator().manual_seed(0)
+def _sample_texture_cases():
+    gen = _gen()
     texture = torch.rand(7, 5, 3, generator=gen, dtype=torch.float64)
     uv = torch.rand(400, 2, generator=gen, dtype=torch.float64) * 1.4 - 0.2  # 30% outside [0, 1]: clamped
-    assert_close(*both_paths(lambda: values_and_grads(sample_texture, [texture, uv])))
+    return [Case(texture, uv, grads=(0, 1))]
+
+
+def _shade_cases():
+    """Random per-vertex values and maps on 60 covered pixels of a 9 x 11 image, 2 lights, 4 bands."""
+    gen = _gen()
+    used, lights, bands, num, size = 30, 2, 4, 60, (9, 11)
+    plain = torch.rand(used, 3 * lights + 5, generator=gen, dtype=torch.float64)
+    plain[:, 3 * lights : 3 * lights + 3] = torch.randn(used, 3, generator=gen, dtype=torch.float64)  # normals
+    bands_v = torch.randn(used, bands, 3 * lights, generator=gen, dtype=torch.float64)
+    uvs = torch.rand(20, 2, generator=gen, dtype=torch.float64)
+    bary = torch.rand(num, 3, generator=gen, dtype=torch.float64) + 0.1
+    bary = bary / bary.sum(1, keepdim=True)
+    maps = [torch.rand(6, 5, c, generator=gen, dtype=torch.float64) for c in (3, 3, 1)]
+    maps[2] = 0.05 + 0.9 * maps[2]  # roughness inside (1e-3, 1): the clamps pass gradients
+    covered = torch.randperm(size[0] * size[1], generator=gen)[:num]
+    pixels = (covered, torch.randint(0, used, (num, 3), generator=gen), torch.randint(0, 20, (num, 3), generator=gen))
+    return [Case(plain, bands_v, uvs, bary, *maps, pixels, size, grads=(0, 1, 3, 4, 5, 6))]
+
+
+def _renumber_cases():
+    return [Case(torch.randint(0, 50, (40, 3), generator=_gen()), 60)]
+
+
+def _triangle_box_pixels_cases():
+    gen = _gen()
+    pixels = torch.rand(30, 2, generator=gen, dtype=torch.float64) * torch.tensor([36.0, 26.0]) - 3.0
+    pixels[4, 0] = float("nan")  # a degenerate vertex: its triangles mark nothing
+    triangles = torch.randint(0, 30, (12, 3), generator=gen)
+    _, cam, _, projected, _ = _projected_scene()
+    loss_triangles = Loss().mesh.triangles
+    return [Case(pixels, triangles, 20, 30), Case(projected, loss_triangles, cam.height, cam.width)]
+
+
+def _pixel_directions_cases():
+    cam = Camera(torch.tensor(150.0), torch.tensor([3.0, 0.4, -0.2]), torch.tensor([0.5, -1.0, 40.0]), 120, 90)
+    rotation = cam.rotation_matrix.numpy().astype(np.float32)
+    # float32 rays: the loop and numpy round differently (the length of a unit direction to 1e-6)
+    return [Case(np.arange(0, 120 * 90, 7), (90, 120), 150.0, rotation, rtol=0, atol=1e-6)]
+
+
+CASES = {
+    "interpolate": _interpolate_cases,
+    "filtered_interpolation": _filtered_interpolation_cases,
+    "barycentrics": _barycentrics_cases,
+    "sh_basis": _sh_basis_cases,
+    "sh_band_sums": _sh_band_sums_cases,
+    "sh_irradiance": _sh_irradiance_cases,
+    "vertex_normals": _vertex_normals_cases,
+    "reflect": _reflect_cases,
+    "sample_texture": _sample_texture_cases,
+    "shade": _shade_cases,
+    "renumber": _renumber_cases,
+    "triangle_box_pixels": _triangle_box_pixels_cases,
+    "pixel_directions": _pixel_directions_cases,
+}
+"""Every op in kernels.OPS has its cases here: ``test_every_registered_op_has_cases`` fails otherwise."""
+
+
+def _outputs(function, case: Case) -> list[torch.Tensor]:
+    """The op's outputs (as tensors) and the gradients of a fixed random projection of its floating outputs
+    to the arguments ``case.grads``."""
+    args = [a.detach().clone().requires_grad_() if i in case.grads else a for i, a in enumerate(case.args)]
+    out = function(*args)
+    outs = [torch.as_tensor(np.ascontiguousarray(o)) if isinstance(o, np.ndarray) else o for o in
+            (out if isinstance(out, tuple | list) else (out,))]
+    results = [o.detach() for o in outs]
+    if case.grads:
+        gen = torch.Generator().manual_seed(1)
+        total = sum((o * torch.rand(o.shape, generator=gen, dtype=o.dtype)).sum() for o in outs if o.requires_grad)
+        inputs = [args[i] for i in case.grads]
+        grads = torch.autograd.grad(total, inputs, allow_unused=True)
+        results += [torch.zeros_like(x) if g is None else g for x, g in zip(inputs, grads, strict=True)]
+    return results
+
+
+def test_every_registered_op_has_cases():
+    """A new op cannot be registered without a case in CASES (and so without being tested)."""
+    missing, stale = sorted(set(kernels.OPS) - set(CASES)), sorted(set(CASES) - set(kernels.OPS))
+    assert not missing, f"ops without a test case in CASES: {missing}"
+    assert not stale, f"CASES for ops that are not registered: {stale}"
+
+
+@pytest.mark.parametrize("name", sorted(kernels.OPS))
+def test_op_fast_path_matches_reference_on_1_and_2_threads(name):
+    """Values and gradients of the fast path equal the reference's (float64 rounding), and are bit-identical
+    on 1 and 2 threads."""
+    op = kernels.OPS[name]
+    assert name in CASES, f"op {name!r} has no test case in CASES"
+    for case in CASES[name]():
+        with kernels.backend("torch"):
+            assert not op.use_fast(*case.args)
+            reference = _outputs(op, case)
+        fast = {}
+        try:
+            for threads in (1, 2):
+                kernels.set_threads(threads)
+                with kernels.backend("numba"):
+                    assert op.use_fast(*case.args), f"{name}: the fast path does not take this case"
+                    fast[threads] = _outputs(op, case)
+        finally:
+            kernels.set_threads(None)
+        assert_close(fast[1], reference, rtol=case.rtol, atol=case.atol)
+        for one, two in zip(fast[1], fast[2], strict=True):
+            assert torch.equal(one, two), f"{name}: 1 and 2 threads differ"
+
+
+# -- the whole render on both paths ------------------------------------------------------------------
+def test_primary_rays_only_in_triangle_boxes_find_every_hit():
+    """Tracing only the pixels inside some triangle's projected box misses no hit (same ids as every pixel)."""
+    loss = Loss()
+    for params in (loss.params, {**loss.params, "focal": torch.tensor(90.0, dtype=torch.float64)}):
+        cam = loss.camera(params)
+        ids = loss.renderer.rasterize(loss.mesh, cam).triangle_id.reshape(-1).numpy()
+        every = loss.renderer.ray_scene(loss.mesh).first_triangles(*_pixel_rays(cam, np.arange(ids.shape[0])))
+        assert np.array_equal(ids, every) and bool((ids >= 0).any())
 
 
 def test_render_values_and_gradients_match_reference():
@@ -202,26 +338,6 @@ def test_vertex_normals_follow_in_place_edits_of_the_triangles():
     normals_and_grads()  # fills the cache for this triangles tensor
     sphere.triangles[:] = torch.roll(sphere.triangles, 1, dims=0).clone()  # other vertices at each slot
     assert_close(*both_paths(normals_and_grads))
-
-
-def test_primary_ray_directions_match_the_numpy_path():
-    """The numba loop building Embree's primary rays gives numpy's unit directions (float32 rounding)."""
-    cam = Camera(
-        focal=torch.tensor(150.0),
-        rotation=torch.tensor([3.0, 0.4, -0.2]),
-        translation=torch.tensor([0.5, -1.0, 40.0]),
-        width=120,
-        height=90,
-    )
-    flat = np.arange(0, 120 * 90, 7)
-
-    def rays():
-        return [torch.from_numpy(np.ascontiguousarray(a)) for a in _pixel_rays(cam, flat)]
-
-    fast, reference = both_paths(rays)
-    torch.testing.assert_close(fast[0], reference[0])
-    torch.testing.assert_close(fast[1], reference[1], rtol=0, atol=1e-6)
-    torch.testing.assert_close(fast[1].norm(dim=1), torch.ones(len(flat)), rtol=0, atol=1e-6)
 
 
 def test_shadowed_vertex_irradiance_matches_the_reference_path():

@@ -129,7 +129,7 @@ def test_real_photo_fit(ict, photos):
     image = load_image(photos / "nextface-s2.png")
     landmarks = detect_landmarks(image)
     corr = correspondence_for(ict)
-    result = fit_landmarks(ict, corr, [landmarks], landmarks.image_size, Stage1Config(iterations=200))
+    result = fit_landmarks(ict, corr, [landmarks], landmarks.image_size, Stage1Config(), iterations=200)
     assert result.error_iod[0] < 0.03
     # Upright, facing the camera: the model's +y (up) maps to image up, +z (toward viewer) to the camera.
     camera = result.camera(0)
@@ -143,4 +143,4 @@ def test_bad_input_raises(ict):
     with pytest.raises(ValueError, match="one Landmarks per frame"):
         fit_landmarks(ict, corr, [None], SIZE)
     with pytest.raises(ValueError, match="rigid_iterations"):
-        fit_landmarks(ict, corr, [object()], SIZE, Stage1Config(iterations=10, rigid_iterations=20))
+        fit_landmarks(ict, corr, [object()], SIZE, Stage1Config(rigid_iterations=20), iterations=10)

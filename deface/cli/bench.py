@@ -25,6 +25,7 @@ def register(app: typer.Typer) -> None:
     bench.command("make-shadows")(make_shadows_command)
     bench.command("run")(run_command)
     bench.command("skin-tone")(skin_tone_command)
+    bench.command("sheet")(sheet_command)
     app.add_typer(bench, name="bench")
 
 
@@ -111,6 +112,24 @@ def run_command(
     command += f" --limit {limit}" if limit else ""
     update_benchmarks_md(report, report_markdown(output, pairs, schedule, command, limit))
     console.print(f"wrote the evaluation tables to {report}")
+
+
+def sheet_command(
+    results: Annotated[Path, typer.Argument(help="Results folder of `deface bench run`.")],
+    pairs: Annotated[str, typer.Option(help="Comma list of pair names to show.")],
+    variants: Annotated[str, typer.Option(help="Comma list of variants (columns).")] = "ours,nextface",
+    before: Annotated[Path | None, typer.Option(help="An earlier results folder: its first variant's map too.")] = None,
+) -> None:
+    """RESULTS/textures_sheet.png: the photos and the diffuse maps fitted from each, per pair and variant."""
+    from deface.eval.sheets import texture_sheet
+
+    names = [p.strip() for p in pairs.split(",") if p.strip()]
+    chosen = [v.strip() for v in variants.split(",") if v.strip()]
+    missing = [f"{v}/{p}" for v in chosen for p in names if not (results / v / p / "source.png").is_file()]
+    if missing:
+        typer.echo(f"error: no results for {', '.join(missing)} in {results}", err=True)
+        raise typer.Exit(2)
+    typer.echo(f"wrote {texture_sheet(results, names, chosen, before)}")
 
 
 def skin_tone_command(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
@@ -18,8 +19,8 @@ def register(app: typer.Typer) -> None:
 
 
 def demo_command(
-    output: Path = typer.Option(Path("out/demo"), "-o", "--output", help="Output folder."),
-    preset: str = typer.Option("default", help="Preset to fit with."),
+    output: Annotated[Path, typer.Option("-o", "--output", help="Output folder.")] = Path("out/demo"),
+    preset: Annotated[str, typer.Option(help="Preset to fit with (`deface presets` lists them).")] = "default",
 ) -> None:
     """Fit a photo with foliage shadows from ../shared/data/images and write everything to OUTPUT."""
     shared = shared_dir()

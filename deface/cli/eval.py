@@ -3,43 +3,49 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 import typer
+from rich.markup import escape
 
-from deface.fit import presets
+from deface.cli import options
 from deface.fit.log import console
 
 
 def register(app: typer.Typer) -> None:
     eval_app = typer.Typer(no_args_is_help=True, help="Evaluate texture recovery (texture-swap protocol).")
-    eval_app.command("pairs")(pairs_command)
+    eval_app.command("pairs", epilog=options.settings_help())(pairs_command)
     app.add_typer(eval_app, name="eval")
 
 
 def pairs_command(
-    directory: Path = typer.Argument(..., help="Folder of pairs: DIR/<name>/source.(png|jpg) + target.(png|jpg)."),
-    output: Path = typer.Option(..., "-o", "--output", help="Where metrics.json and index.html go."),
-    preset: str = typer.Option("default", help=f"One of: {', '.join(presets.names())}."),
-    models: Path | None = typer.Option(None, "--models", help="Model files folder."),
-    iterations: str | None = typer.Option(None, help="Iterations per stage S1,S2,S3 (override the preset)."),
-    lights: int | None = typer.Option(None, help="Ablation: n."),
-    bands: int | None = typer.Option(None, help="Ablation: SH bands."),
-    light_masks: bool | None = typer.Option(None, "--light-masks/--no-light-masks"),
-    face_region: bool | None = typer.Option(None, "--face-region/--no-face-region"),
-    priors: str | None = typer.Option(None, help="Ablation: gp,lp,hp or none."),
+    directory: Annotated[
+        Path, typer.Argument(help="Folder of pairs: DIR/<name>/source.(png|jpg) + target.(png|jpg).")
+    ],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Where metrics.json and index.html go.")],
+    preset: options.Preset = None,
+    config_file: options.ConfigFile = None,
+    sets: options.Set = None,
+    models: options.Models = None,
+    iterations: options.Iterations = None,
+    lights: options.Lights = None,
+    bands: options.Bands = None,
+    light_masks: options.LightMasks = None,
+    face_region: options.FaceRegion = None,
+    priors: options.Priors = None,
 ) -> None:
     """Fit every pair's source and target, swap textures, score, write OUT/metrics.json and OUT/index.html."""
-    from deface.cli.fit import _config
     from deface.eval.pairs import read_pairs
     from deface.eval.protocol import evaluate_pair
     from deface.eval.report import write_index_html, write_metrics_json
 
     try:
-        config = _config(preset, 0, lights, bands, light_masks, face_region, priors, None, iterations,
-                         None, None, None)
+        options.check_models_dir(models)
+        config = options.fit_config(preset, config_file, sets, iterations=iterations, lights=lights, bands=bands,
+                                    light_masks=light_masks, face_region=face_region, priors=priors)
         pairs = read_pairs(directory)
     except (ValueError, FileNotFoundError) as error:
-        console.print(f"[red]error:[/red] {error}")
+        console.print(f"[red]error:[/red] {escape(str(error))}")
         raise typer.Exit(2) from None
     outcomes = []
     for index, pair in enumerate(pairs):

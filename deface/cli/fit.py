@@ -10,6 +10,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -18,8 +19,7 @@ from rich.markup import escape
 from deface.cli import options
 from deface.export.files import OutputBusy, OutputError, check_writable, claimed_output
 from deface.export.outputs import write_fit
-from deface.fit import presets
-from deface.fit.config import FitConfig, override
+from deface.fit.config import FitConfig
 from deface.fit.guard import NonFiniteError
 from deface.fit.log import FitLog, console
 from deface.fit.pipeline import fit
@@ -63,50 +63,52 @@ class Tally:
 
 
 def register(app: typer.Typer) -> None:
-    app.command("fit")(fit_command)
+    app.command("fit", epilog=options.settings_help())(fit_command)
 
 
 def fit_command(
-    inputs: list[Path] = typer.Argument(..., help="Images, folders of images, or videos."),
-    output: Path = typer.Option(..., "-o", "--output", help="Output folder; one sub-folder per input."),
-    preset: str = typer.Option("default", help=f"One of: {', '.join(presets.names())}."),
-    models: Path | None = typer.Option(None, "--models", help="Model files folder, the only one searched "
-                                       "(default: DEFACE_MODELS, then the cache)."),
-    model: str = typer.Option("ict", "--model", help="Face model: ict (embedded) or bfm (BFM 2017 + AlbedoMM)."),
-    seed: int = typer.Option(0, help="Random seed (fits are deterministic for a seed)."),
-    lights: int | None = typer.Option(None, help="Ablation: initial number of light conditions n (1-16)."),
-    bands: int | None = typer.Option(None, help="Ablation: SH bands B per light (1-16)."),
-    light_masks: bool | None = typer.Option(None, "--light-masks/--no-light-masks", help="Ablation: field f."),
-    face_region: bool | None = typer.Option(None, "--face-region/--no-face-region", help="Ablation: field g."),
-    priors: str | None = typer.Option(None, help="Ablation: priors to use, comma list of gp,lp,hp or none."),
-    resolution: int | None = typer.Option(None, help="Working resolution (longest side, 32-2048 px)."),
-    texture_size: int | None = typer.Option(None, "--texture-size", help="UV texture side (16-4096 texels; "
-                                            "the preset's default is 512)."),
-    iterations: str | None = typer.Option(None, help="Iterations per stage as S1,S2,S3 (e.g. 300,400,200)."),
-    max_frames: int | None = typer.Option(None, help="Video: number of frames used (evenly spread)."),
-    frame_stride: int | None = typer.Option(None, help="Video: take every k-th frame first."),
-    face_index: int | None = typer.Option(None, help="Which face when several (0 = largest)."),
-    threads: int | None = typer.Option(None, help="Torch threads (default 1: bit-exact results per seed)."),
-    overwrite: bool = typer.Option(False, help="Redo inputs whose outputs already exist (default: skip them)."),
-    quiet: bool = typer.Option(False, help="Only errors and a summary."),
-    verbose: bool = typer.Option(False, help="Print the full details (traceback, tool output) of each error."),
+    inputs: Annotated[list[Path], typer.Argument(help="Images, folders of images, or videos.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Output folder; one sub-folder per input.")],
+    preset: options.Preset = None,
+    config_file: options.ConfigFile = None,
+    sets: options.Set = None,
+    models: options.Models = None,
+    model: options.Model = None,
+    seed: options.Seed = None,
+    lights: options.Lights = None,
+    bands: options.Bands = None,
+    light_masks: options.LightMasks = None,
+    face_region: options.FaceRegion = None,
+    priors: options.Priors = None,
+    resolution: options.Resolution = None,
+    texture_size: options.TextureSize = None,
+    iterations: options.Iterations = None,
+    max_frames: options.MaxFrames = None,
+    frame_stride: options.FrameStride = None,
+    face_index: options.FaceIndex = None,
+    threads: options.Threads = None,
+    overwrite: Annotated[bool, typer.Option(help="Redo inputs whose outputs already exist (default: skip them).")]
+    = False,
+    quiet: Annotated[bool, typer.Option(help="Only errors and a summary.")] = False,
+    verbose: Annotated[bool, typer.Option(help="Print the full details (traceback, tool output) of each error.")]
+    = False,
 ) -> None:
     """Fit each input and write OUT/<input stem>/ (textures, mesh.obj/.mtl/.glb, params, renders, masks)."""
     try:
         options.check_output(output)
         options.check_models_dir(models)
-        options.check_face_model(model)
-        config = override(_config(preset, seed, lights, bands, light_masks, face_region, priors, resolution,
-                                  iterations, max_frames, frame_stride, face_index, threads), model=model)
-        if texture_size is not None:
-            options.check_ranges({"--texture-size": texture_size})
-            config = override(config, texture_size=texture_size)
+        config = options.fit_config(
+            preset, config_file, sets, model=model, seed=seed, lights=lights, bands=bands, light_masks=light_masks,
+            face_region=face_region, priors=priors, resolution=resolution, texture_size=texture_size,
+            iterations=iterations, max_frames=max_frames, frame_stride=frame_stride, face_index=face_index,
+            threads=threads,
+        )
         items = list_inputs(inputs)
     except (InputError, ValueError, OSError) as error:
         report_error(error)
         raise typer.Exit(EXIT_USAGE) from None
     try:
-        require_face_model(model, models)
+        require_face_model(config.model, models)
         check_writable(output)
     except (ModelFileError, OutputError) as error:
         report_error(error)
@@ -173,22 +175,6 @@ def _signals_raise() -> Iterator[None]:
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
-
-
-def _config(preset, seed, lights, bands, light_masks, face_region, priors, resolution, iterations,
-            max_frames, frame_stride, face_index, threads=None) -> FitConfig:
-    """The preset with the command line's changes, each option checked first (options.UsageError)."""
-    options.check_ranges({"--seed": seed, "--lights": lights, "--bands": bands, "--resolution": resolution,
-                          "--max-frames": max_frames, "--frame-stride": frame_stride,
-                          "--face-index": face_index, "--threads": threads})
-    config = presets.with_ablation(presets.get(preset), num_lights=lights, light_masks=light_masks,
-                                   face_region=face_region, priors=priors, bands=bands)
-    changes = {"seed": seed, "resolution": resolution, "max_frames": max_frames, "frame_stride": frame_stride,
-               "face_index": face_index, "threads": threads}
-    if iterations is not None:
-        stage1, stage2, stage3 = options.parse_iterations(iterations)
-        changes.update({"iterations.stage1": stage1, "iterations.stage2": stage2, "iterations.stage3": stage3})
-    return override(config, **{key: value for key, value in changes.items() if value is not None})
 
 
 def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], list[int]]:

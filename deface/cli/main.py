@@ -12,6 +12,7 @@ app = typer.Typer(
 
 SUBCOMMAND_MODULES = (
     "deface.cli.fit",
+    "deface.cli.presets",
     "deface.cli.models",
     "deface.cli.eval",
     "deface.cli.bench",

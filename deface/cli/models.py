@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
+from typing import Annotated
 
 import typer
 from rich.console import Console
@@ -17,11 +18,10 @@ err_console = Console(stderr=True)
 
 models_app = typer.Typer(no_args_is_help=True, help="Face-model files: list, check, build, fetch.")
 
-NAMES_ARGUMENT = typer.Argument(None, help="Keys or groups to require (e.g. bfm); default: all.")
-FROM_OPTION = typer.Option(..., "--from", help="ICT-FaceKit checkout (or its FaceXModel folder).")
-MODELS_OPTION = typer.Option(
-    None, "--models", help="Models directory (else DEFACE_MODELS, else the user cache)."
-)
+Names = Annotated[list[str] | None, typer.Argument(help="Keys or groups to require (e.g. bfm); default: all.")]
+From = Annotated[Path, typer.Option("--from", help="ICT-FaceKit checkout (or its FaceXModel folder).")]
+Models = Annotated[Path | None, typer.Option("--models", help="Models directory (else DEFACE_MODELS, else the user "
+                                                               "cache).")]
 
 
 def register(app: typer.Typer) -> None:
@@ -64,7 +64,7 @@ def _table(statuses: list[registry.FileStatus], show_checksum: bool) -> Table:
 
 
 @models_app.command("list")
-def list_files(models: Path | None = MODELS_OPTION) -> None:
+def list_files(models: Models = None) -> None:
     """Show every known model file: found or missing, licence, where it comes from."""
     statuses = [registry.status(e, models) for e in registry.MODEL_FILES]
     console.print(_table(statuses, show_checksum=False))
@@ -87,8 +87,8 @@ def _bfm_report(models: Path | None) -> str | None:
 
 @models_app.command("check")
 def check(
-    names: list[str] | None = NAMES_ARGUMENT,
-    models: Path | None = MODELS_OPTION,
+    names: Names = None,
+    models: Models = None,
 ) -> None:
     """Verify files and checksums; exit 1 when a required (or named) file is missing or corrupt."""
     entries = _select(names)
@@ -110,9 +110,9 @@ def check(
 
 @models_app.command("build")
 def build(
-    name: str = typer.Argument(..., help="What to build: ict."),
-    source: Path = FROM_OPTION,
-    models: Path | None = MODELS_OPTION,
+    name: Annotated[str, typer.Argument(help="What to build: ict.")],
+    source: From,
+    models: Models = None,
 ) -> None:
     """Build a model pack from upstream files (ict: the face-area npz from ICT-FaceKit's OBJs)."""
     if name != "ict":
@@ -131,10 +131,10 @@ def build(
 
 @models_app.command("fetch")
 def fetch(
-    name: str = typer.Argument(..., help="What to fetch: ict (the only freely downloadable model)."),
-    models: Path | None = MODELS_OPTION,
-    url: str | None = typer.Option(None, help="Override the download URL (zip of the repository)."),
-    timeout: float = typer.Option(10.0, help="Seconds before giving up on an unreachable server."),
+    name: Annotated[str, typer.Argument(help="What to fetch: ict (the only freely downloadable model).")],
+    models: Models = None,
+    url: Annotated[str | None, typer.Option(help="Override the download URL (zip of the repository).")] = None,
+    timeout: Annotated[float, typer.Option(help="Seconds before giving up on an unreachable server.")] = 10.0,
 ) -> None:
     """Download the public ICT-FaceKit repository and build the pack (needs internet)."""
     if name != "ict":

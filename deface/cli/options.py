@@ -1,5 +1,11 @@
-"""Command-line option checks, in one place: every numeric option's documented range, checked before any
-work starts, so a bad value is a usage error (exit 2) naming the option, never a failure of each input.
+"""Command-line options shared by the commands that fit, declared once (``Annotated`` aliases), and their
+checks: every numeric option's documented range, checked before any work starts, so a bad value is a usage
+error (exit 2) naming the option, never a failure of each input.
+
+A fitting command's configuration is built by ``fit_config`` in one order: the preset (or ``--config``, a
+finished run's params.json), then the shortcut options (``--lights``, ``--iterations``, ...: each is a named
+config path, ``SHORTCUTS``), then every ``--set PATH=VALUE`` in the order given. Every setting of FitConfig
+is reachable with ``--set``; ``settings_help`` lists them from the config's docstrings.
 
 The ranges bound what a CPU fit can do in reasonable memory and time; README ("When things go wrong")
 lists them.
@@ -7,8 +13,16 @@ lists them.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.markup import escape
+
+from deface.fit import presets
+from deface.fit.config import FitConfig, documentation, from_dict, override, set_from_text
 
 
 class UsageError(ValueError):
@@ -66,7 +80,7 @@ def parse_iterations(text: str) -> tuple[int, int, int]:
 
 def check_face_model(name: str) -> None:
     if name not in FACE_MODELS:
-        raise UsageError(f"--model must be one of {', '.join(FACE_MODELS)}, got '{name}'")
+        raise UsageError(f"--model (config: model) must be one of {', '.join(FACE_MODELS)}, got '{name}'")
 
 
 def check_models_dir(path: Path | None) -> None:
@@ -79,3 +93,148 @@ def check_output(path: Path) -> None:
     """``-o OUT`` must be a folder or not exist yet (it is created)."""
     if path.exists() and not path.is_dir():
         raise UsageError(f"-o {path}: exists and is not a folder; name a folder (it is created if missing)")
+
+
+# -- the options of every fitting command (fit, eval pairs), declared once ----------------------------
+Preset = Annotated[
+    str | None, typer.Option(help=f"Preset: one of {', '.join(presets.names())} (`deface presets` shows them).")
+]
+ConfigFile = Annotated[
+    Path | None,
+    typer.Option("--config", help="Start from a finished run's configuration: its params.json (or its folder) "
+                                  "replays the run exactly; instead of --preset."),
+]
+Set = Annotated[
+    list[str] | None,
+    typer.Option("--set", metavar="PATH=VALUE",
+                 help="Set any config value, e.g. --set decouple.epsilon=0.12 (repeatable; applied last, in "
+                      "order). The settings are listed below."),
+]
+Models = Annotated[
+    Path | None,
+    typer.Option("--models", help="Model files folder, the only one searched (default: DEFACE_MODELS, then the "
+                                  "cache)."),
+]
+Model = Annotated[str | None, typer.Option("--model", help="Face model: ict (embedded) or bfm (BFM 2017 + "
+                                                           "AlbedoMM). (config: model)")]
+Seed = Annotated[int | None, typer.Option(help="Random seed (fits are deterministic for a seed). (config: seed)")]
+Lights = Annotated[int | None, typer.Option(help="Ablation: initial number of light conditions n (1-16). "
+                                                 "(config: lights.num_lights)")]
+Bands = Annotated[int | None, typer.Option(help="Ablation: SH bands B per light (1-16). (config: lights.bands)")]
+LightMasks = Annotated[bool | None, typer.Option("--light-masks/--no-light-masks",
+                                                 help="Ablation: the light-mask field f. [config: "
+                                                      "decouple.light_masks]")]
+FaceRegion = Annotated[bool | None, typer.Option("--face-region/--no-face-region",
+                                                 help="Ablation: the face-region field g. [config: "
+                                                      "decouple.face_region]")]
+Priors = Annotated[str | None, typer.Option(help="Ablation: priors to use, comma list of gp,lp,hp or none. "
+                                                 "(config: priors.global_prior, local_prior, human_prior)")]
+Resolution = Annotated[int | None, typer.Option(help="Working resolution (longest side, 32-2048 px). "
+                                                     "(config: resolution)")]
+TextureSize = Annotated[int | None, typer.Option("--texture-size", help="UV texture side (16-4096 texels; the "
+                                                                     "preset's default is 512). (config: "
+                                                                     "texture_size)")]
+Iterations = Annotated[str | None, typer.Option(help="Iterations per stage as S1,S2,S3 (e.g. 300,400,200). "
+                                                     "(config: iterations.stage1, stage2, stage3)")]
+MaxFrames = Annotated[int | None, typer.Option(help="Video: number of frames used (evenly spread). "
+                                                    "(config: max_frames)")]
+FrameStride = Annotated[int | None, typer.Option(help="Video: take every k-th frame first. [config: "
+                                                      "frame_stride]")]
+FaceIndex = Annotated[int | None, typer.Option(help="Which face when several (0 = largest). [config: "
+                                                    "face_index]")]
+Threads = Annotated[int | None, typer.Option(help="Torch threads (default 1: bit-exact results per seed). "
+                                                  "(config: threads)")]
+
+SHORTCUTS = {
+    "--model": "model",
+    "--seed": "seed",
+    "--resolution": "resolution",
+    "--texture-size": "texture_size",
+    "--max-frames": "max_frames",
+    "--frame-stride": "frame_stride",
+    "--face-index": "face_index",
+    "--threads": "threads",
+    "--lights": "lights.num_lights",
+    "--bands": "lights.bands",
+    "--light-masks": "decouple.light_masks",
+    "--face-region": "decouple.face_region",
+}
+"""Options that set one config path each (``--priors`` and ``--iterations`` set several, see ``fit_config``)."""
+
+
+def fit_config(preset: str | None = None, config_file: Path | None = None, sets: list[str] | None = None,
+               **shortcuts: Any) -> FitConfig:
+    """The configuration of a fitting command: the preset (default: "default") or ``config_file``, then the
+    shortcut options by option name without dashes (``lights=3``, ``iterations="300,400,200"``, ``priors``;
+    None = not given), then ``sets`` (``PATH=VALUE``, in order). Raises UsageError naming the option."""
+    given = {f"--{name.replace('_', '-')}": value for name, value in shortcuts.items() if value is not None}
+    unknown = set(given) - set(SHORTCUTS) - {"--iterations", "--priors"}
+    if unknown:
+        raise TypeError(f"fit_config: no shortcut option {', '.join(sorted(unknown))}")
+    check_ranges({option: value for option, value in given.items() if option in RANGES})
+    if "--model" in given:
+        check_face_model(given["--model"])
+    if config_file is not None and preset is not None:
+        raise UsageError("give --preset or --config, not both (--config replays a run, preset included)")
+    config = load_config_file(config_file) if config_file is not None else _preset(preset or "default")
+    changes = {SHORTCUTS[option]: value for option, value in given.items() if option in SHORTCUTS}
+    if "--iterations" in given:
+        stages = parse_iterations(given["--iterations"])
+        changes.update({f"iterations.stage{k + 1}": steps for k, steps in enumerate(stages)})
+    config = override(config, **changes)
+    if "--priors" in given:
+        try:
+            config = presets.with_ablation(config, priors=given["--priors"])
+        except ValueError as error:
+            raise UsageError(f"--priors: {error}") from None
+    for assignment in sets or []:
+        try:
+            config = set_from_text(config, assignment)
+        except ValueError as error:
+            raise UsageError(f"--set {assignment}: {error}") from None
+    check_face_model(config.model)
+    return config
+
+
+def _preset(name: str) -> FitConfig:
+    try:
+        return presets.get(name)
+    except ValueError as error:
+        raise UsageError(f"--preset: {error}") from None
+
+
+def load_config_file(path: Path) -> FitConfig:
+    """The FitConfig recorded in a run's params.json (``path`` is the file or the run's folder), or in a JSON
+    file holding a config alone; UsageError (one line) when it is missing or not a valid config."""
+    file = path / "params.json" if path.is_dir() else path
+    try:
+        data = json.loads(file.read_text())
+    except FileNotFoundError:
+        raise UsageError(f"--config {path}: no such file" + (" (no params.json in that folder)" if path.is_dir()
+                                                            else "")) from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise UsageError(f"--config {file}: cannot read it ({error})") from None
+    except json.JSONDecodeError as error:
+        raise UsageError(f"--config {file}: not JSON ({error})") from None
+    if isinstance(data, dict) and "config" in data:
+        data = data["config"]
+    try:
+        return from_dict(data)
+    except ValueError as error:
+        raise UsageError(f"--config {file}: {error}") from None
+
+
+def settings_help() -> str:
+    """Every setting as ``path = default: docstring`` (for ``--help``; rich markup escaped)."""
+    lines = ["Settings (--set PATH=VALUE; defaults of FitConfig, the presets change some: `deface presets`):"]
+    lines += [f"  {path} = {show_value(default)}: {doc}" for path, default, doc in documentation()]
+    return escape("\n".join(lines))
+
+
+def show_value(value: Any) -> str:
+    """A value as ``--set`` takes it."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, tuple):
+        return ",".join(show_value(v) for v in value)
+    return "none" if value is None else str(value)

@@ -33,6 +33,7 @@ class Variant:
 VARIANTS = {v.name: v for v in [
     Variant("nextface", "nextface"),
     Variant("ours", "default"),
+    Variant("tone", "deface-tone"),
     Variant("nextface-star", "nextface-star"),
     Variant("paper", "paper"),
     # The ablations change one thing of the default preset, so each row differs from "ours" in that only.
@@ -54,7 +55,8 @@ VARIANTS = {v.name: v for v in [
 # itself names "ours" (tests/test_eval_benchmark.py checks every row's configuration against its label).
 TABLES = [
     ("Methods (paper Table 1 / 5)", [("NextFace", "nextface"), ("NextFace*", "nextface-star"),
-                                     ("Ours (default preset)", "ours"), ("Paper preset", "paper")]),
+                                     ("Ours (default preset)", "ours"), ("Skin-tone preset (deface-tone)", "tone"),
+                                     ("Paper preset", "paper")]),
     ("Neural representations (paper Table 7; without g, M_o = M_R h)",
      [("w/o f, w/o g", "no-f-no-g"), ("+ f (Ours)", "ours"), ("+ g only", "g-only"), ("+ f + g", "f-and-g")]),
     ("Priors (paper Table 8; HP needs FaceNet weights: absent here, so GP+LP is the full set)",
@@ -72,9 +74,9 @@ UV_TABLE = ("UV-space textures (issue 12)", [("NextFace", "nextface"), ("Paper p
 # recorded tables (128-px working images, half-length stages), applied to every variant alike.
 SCHEDULES = {
     "full": {},
-    "smoke": {"resolution": 64, "texture_size": 64, "shadow_rays": 16, "iterations.stage1": 20,
+    "smoke": {"resolution": 64, "texture_size": 64, "render.shadow_rays": 16, "iterations.stage1": 20,
               "iterations.stage2": 8, "iterations.stage3": 3, "decouple.ace_iteration": 4},
-    "quick": {"resolution": 128, "texture_size": 256, "shadow_rays": 64, "iterations.stage1": 200,
+    "quick": {"resolution": 128, "texture_size": 256, "render.shadow_rays": 64, "iterations.stage1": 200,
               "iterations.stage2": 200, "iterations.stage3": 100, "decouple.ace_iteration": 50},
 }
 

@@ -24,6 +24,7 @@ import numpy as np
 from scipy import stats
 
 from deface.eval.benchmark import cached_scores, config_json, map_in_processes
+from deface.eval.sheets import image_grid
 from deface.fit import presets
 from deface.fit.config import FitConfig, override
 
@@ -173,27 +174,19 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
 def contact_sheet(folder: Path, out_dir: Path, photos: list[TonePhoto], variants: list[str], tile: int = 160):
     """OUT/contact_sheet.png: per photo, the photo | albedo texture | albedo under a neutral white light
     (first variant) | the other variants' albedo textures; the ITAs underneath."""
-    from PIL import Image, ImageDraw
+    from PIL import Image
 
-    columns = 3 + len(variants) - 1
-    caption = 14
-    sheet = Image.new("RGB", (columns * tile, len(photos) * (tile + caption)), "white")
-    draw = ImageDraw.Draw(sheet)
-    for row, photo in enumerate(photos):
+    rows, captions = [], []
+    for photo in photos:
         first = out_dir / variants[0] / photo.stem
-        images = [folder / "images" / photo.file, first / "textures" / "diffuse.png", first / "neutral.png"]
-        images += [out_dir / v / photo.stem / "textures" / "diffuse.png" for v in variants[1:]]
-        top = row * (tile + caption)
-        for column, path in enumerate(images):
-            with Image.open(path) as image:
-                image = image.convert("RGB")
-                image = _face_crop(image) if column == 2 else image
-                image.thumbnail((tile, tile))
-                sheet.paste(image, (column * tile, top))
+        with Image.open(first / "neutral.png") as neutral:
+            albedo = _face_crop(neutral.convert("RGB"))
+        row = [folder / "images" / photo.file, first / "textures" / "diffuse.png", albedo]
+        rows.append(row + [out_dir / v / photo.stem / "textures" / "diffuse.png" for v in variants[1:]])
         texts = [f"{photo.file[:22]}", *[_ita_caption(out_dir / v / photo.stem / "tone.json", photo) for v in variants]]
-        draw.text((2, top + tile), "   |   ".join(texts), fill="black")
+        captions.append("   |   ".join(texts))
     path = out_dir / "contact_sheet.png"
-    sheet.save(path)
+    image_grid(rows, captions, tile).save(path)
     return path
 
 

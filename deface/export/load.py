@@ -8,15 +8,13 @@ from __future__ import annotations
 
 import csv
 import json
-from dataclasses import fields, is_dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 
 from deface.export.outputs import PARAMS_FORMAT
-from deface.fit.config import FitConfig, override
+from deface.fit.config import FitConfig, from_dict
 from deface.fit.output import FitOutput, OutputFrame, RunRecord, StoredPose, frozen_geometry
 from deface.fit.target import FitTarget
 from deface.fit.texels import frame_views
@@ -34,7 +32,7 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     """The fit written to ``path`` (an output folder ``OUT/<stem>``) by ``deface fit``."""
     folder = Path(path)
     arrays, params = _read(folder)
-    config = config_from_dict(params.get("config", {}))
+    config = _config(folder, params)
     model = load_face_model(config.model, models_dir)
     pose = StoredPose(*(torch.as_tensor(arrays[name], dtype=torch.float32)
                         for name in ("identity", "expression", "rotation", "translation", "focal")))
@@ -43,7 +41,7 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     frames = []
     for frame in range(pose.expression.shape[0]):
         geometry = frozen_geometry(model, pose, frame, size)
-        camera = supersampled_camera(geometry.camera, config.supersampling)
+        camera = supersampled_camera(geometry.camera, config.render.supersampling)
         frames.append(OutputFrame(
             geometry, _transfer(arrays, frame, config), arrays["photos_srgb"][frame].astype(np.float32),
             _tensor(arrays["face_classifier"][frame]), _tensor(arrays["light_masks"][frame]),
@@ -97,6 +95,13 @@ def read_loss_log(path: Path) -> tuple[dict[str, list[float]], dict[str, list[di
     return losses, terms
 
 
+def _config(folder: Path, params: dict) -> FitConfig:
+    try:
+        return from_dict(params.get("config", {}))
+    except (ValueError, TypeError) as error:
+        raise FitFormatError(f"{folder}: params.json's config cannot be read by this deface ({error})") from None
+
+
 def _transfer(arrays: dict[str, np.ndarray], frame: int, config: FitConfig) -> ShadowTransfer | None:
     if "transfer_occluded" not in arrays:
         return None
@@ -112,21 +117,3 @@ def _tone(params: dict) -> float:
 
 def _tensor(array: np.ndarray) -> torch.Tensor:
     return torch.as_tensor(np.asarray(array, dtype=np.float32))
-
-
-def config_from_dict(values: dict) -> FitConfig:
-    """The :class:`FitConfig` a ``params.json`` recorded (``to_dict`` output); keys this version does not know
-    are left out, missing ones keep their defaults."""
-    return override(FitConfig(), **dict(_flatten(FitConfig(), values, "")))
-
-
-def _flatten(config: Any, values: dict, prefix: str):
-    known = {f.name: getattr(config, f.name) for f in fields(config)}
-    for name, value in values.items():
-        if name not in known:
-            continue
-        current = known[name]
-        if is_dataclass(current) and isinstance(value, dict):
-            yield from _flatten(current, value, f"{prefix}{name}.")
-        else:
-            yield f"{prefix}{name}", tuple(value) if isinstance(current, tuple) and isinstance(value, list) else value

@@ -6,8 +6,12 @@ Weights are named after the paper's Alg. 1 (w0..w7) and Table 6.
 
 from __future__ import annotations
 
+import ast
+import inspect
+import textwrap
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
-from typing import Any, Literal
+from types import UnionType
+from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 from deface.priors.illuminant import IlluminantConfig
 from deface.texture.completion import CompletionConfig
@@ -16,6 +20,8 @@ from deface.texture.pyramid import PyramidConfig
 
 @dataclass(frozen=True)
 class LightConfig:
+    """The light conditions: how many, how many SH bands, how they start."""
+
     num_lights: int = 5
     """n: light conditions at the start (ACE may drop some). 1 = a single global light (NextFace)."""
     bands: int = 9
@@ -29,6 +35,8 @@ class LightConfig:
 
 @dataclass(frozen=True)
 class DecoupleConfig:
+    """Light decoupling: the fields f (light masks) and g (face region), ACE and the losses' forms."""
+
     light_masks: bool = True
     """Use the light-mask field f (off: every kept light covers the whole face, i.e. one light when n = 1)."""
     face_region: bool = True
@@ -55,26 +63,40 @@ class DecoupleConfig:
 
 @dataclass(frozen=True)
 class Weights:
-    photometric: float = 2e3  # w0
-    landmarks: float = 1e-3  # w1
-    segmentation: float = 1.5e2  # w2
-    area: float = 0.5  # w3
-    binary: float = 25.0  # w4
-    global_prior: float = 2e3  # w5
-    local_prior: float = 2.0  # w6
-    human_prior: float = 1.0  # w7
+    """Loss weights of stages 2 and 3 (the paper's w0..w7, Table 6)."""
+
+    photometric: float = 2e3
+    """w0: L_pho, the masked photometric loss."""
+    landmarks: float = 1e-3
+    """w1: L_lan in stage 2."""
+    segmentation: float = 1.5e2
+    """w2: L_seg (g against the face-region classifier h)."""
+    area: float = 0.5
+    """w3: L_area of the light masks."""
+    binary: float = 25.0
+    """w4: L_bin (light masks pushed to 0 or 1)."""
+    global_prior: float = 2e3
+    """w5: GP, the K-means palette prior (stage 3)."""
+    local_prior: float = 2.0
+    """w6: LP, local variations against T^0 (stage 3)."""
+    human_prior: float = 1.0
+    """w7: HP, FaceNet identity confidence (stage 3)."""
     sh_regulariser: float = 1e-4
     """mean(SH^2) in stage 2 (authors' code)."""
     albedo_prior: float = 1.0
     """mean(delta^2) of the albedo-model coefficients in stage 2."""
     identity_prior: float = 1e-3
+    """mean(alpha^2) of the identity coefficients in stage 2."""
     expression_prior: float = 1e-3
+    """The expression prior in stage 2 (mean(beta) of blendshape weights, mean(beta^2) of PCA ones)."""
     texture_regulariser: float = 0.2
     """Scale of the stage-3 NextFace texture regularisers (deface/losses/texture.py; 0.2 in the authors' code)."""
 
 
 @dataclass(frozen=True)
 class Iterations:
+    """Adam steps of each stage."""
+
     stage1: int = 300
     """Landmark fit (the paper's iter_1 = 2000 counts an unvectorised GPU loop; 300 Adam steps converge here)."""
     stage2: int = 400
@@ -85,22 +107,38 @@ class Iterations:
 
 @dataclass(frozen=True)
 class LearningRates:
+    """Adam steps of stages 2 and 3 (stage 1 has its own in ``stage1``)."""
+
     lights: float = 0.007
+    """Stage 2: the SH light coefficients."""
     light_masks: float = 0.007
+    """Stage 2: the light-mask field f."""
     face_region: float = 0.007
+    """Stage 2: the face-region field g."""
     identity: float = 0.01
+    """Stage 2: identity coefficients."""
     albedo: float = 0.007
+    """Stage 2: albedo-model coefficients."""
     expression: float = 0.01
+    """Stage 2: expression coefficients."""
     pose: float = 1e-4
+    """Stage 2: rotation and translation."""
     stage3_diffuse: float = 0.005
+    """Stage 3: the diffuse UV map."""
     stage3_specular: float = 0.005
+    """Stage 3: the specular UV map."""
     stage3_roughness: float = 0.01
+    """Stage 3: the roughness UV map."""
     stage3_light_masks: float = 0.001
+    """Stage 3: the light-mask field f."""
     stage3_lights: float = 0.001
+    """Stage 3: the SH light coefficients."""
 
 
 @dataclass(frozen=True)
 class PriorConfig:
+    """The stage-3 texture priors GP, LP and HP."""
+
     global_prior: bool = True
     """GP: K-means palette of T^0's diffuse (4 x 4 = 16 colours)."""
     local_prior: bool = True
@@ -108,6 +146,14 @@ class PriorConfig:
     human_prior: bool = True
     """HP: FaceNet (VGGFace2) identity confidence; runs only when the user has the weights."""
     palette_size: int = 16
+    """GP: K-means clusters (palette colours)."""
+    palette_samples: int = 8000
+    """GP: texels of T^0 clustered (drawn with the fit's seed): the palette of a smooth T^0 is stable well
+    below sklearn's defaults."""
+    palette_restarts: int = 3
+    """GP: K-means restarts (sklearn's n_init)."""
+    local_prior_weights: tuple[float, float, float] = (5.0, 6.0, 1.0)
+    """LP: weights of its diffuse, specular and roughness terms (the authors' 5 / 6 / 1)."""
 
 
 @dataclass(frozen=True)
@@ -137,6 +183,69 @@ class ToneConfig:
 
 
 @dataclass(frozen=True)
+class Stage1Config:
+    """Stage 1, the landmark fit (deface/fit/stage1.py); its length is ``iterations.stage1``."""
+
+    rigid_iterations: int | None = None
+    """First steps with identity and expression frozen (pose and focal only); None: a quarter of the steps,
+    at most 80 (``rigid_steps``)."""
+    lr_rotation: float = 0.01
+    """Adam step for the axis-angle rotation (radians)."""
+    lr_translation: float = 0.005
+    """Adam step for the translation, as a fraction of the initial camera distance."""
+    lr_focal: float = 0.01
+    """Adam step for log(focal)."""
+    lr_identity: float = 0.05
+    """Adam step for identity coefficients (N(0, 1) units)."""
+    lr_expression: float = 0.02
+    """Adam step for expression coefficients (blendshape weights in [0, 1])."""
+    identity_weight: float = 1e-3
+    """w_id of mean(alpha²) relative to L_lan (which is in units of the normalising size)."""
+    expression_weight: float = 1e-3
+    """w_ex of mean(beta) (blendshapes) or mean(beta²) (PCA expressions)."""
+    initial_fov_degrees: float = 20.0
+    """Field of view over the longest image side that sets the initial focal length."""
+    optimise_focal: bool = True
+    """Fit the focal length (shared by all frames); off: keep the initial one."""
+    normalise_by: Literal["face", "image"] = "face"
+    """Size dividing pixel distances in L_lan: the detected landmarks' bounding-box diagonal ("face";
+    the weights then also do not depend on how much of the photo the face fills) or max(W, H) ("image")."""
+
+    def rigid_steps(self, iterations: int) -> int:
+        """The rigid steps of a stage 1 of ``iterations`` steps."""
+        if self.rigid_iterations is None:
+            return min(80, max(1, iterations // 4))
+        return self.rigid_iterations
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """The renderer as the fit uses it (deface/render; ``deface.fit.target.render_config`` builds its
+    RenderConfig with the lights' bands and the fit's seed)."""
+
+    shadows: bool = True
+    """Ray-traced self-shadowing in the renderer."""
+    shadow_rays: int = 128
+    """Rays per vertex for the shadow transfer."""
+    shadow_refresh_every: int = 50
+    """Stage 2 refreshes the shadow transfer at most this often (geometry moves slowly)."""
+    shadow_tolerance_cm: float = 0.05
+    """A refresh recomputes the transfer only when some vertex moved more than this (cm) since the last one."""
+    shadow_ray_offset: float = 1e-3
+    """Shadow-ray origins move along the normal by this fraction of the mesh's bounding-box diagonal."""
+    specular: bool = True
+    """The roughness-driven Phong specular lobe; off: a purely Lambertian render."""
+    supersampling: int = 2
+    """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
+    render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between
+    pixel centres (the paper's path tracer averaged several samples per pixel too). 1 = one sample."""
+    render_blur: bool = False
+    """L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
+    their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
+    almost invisible to the loss, which stage 3 then bakes into the texture (BENCHMARKS.md)."""
+
+
+@dataclass(frozen=True)
 class FitConfig:
     """Everything one fit uses. Build from a preset: ``presets.get("default")``."""
 
@@ -147,34 +256,35 @@ class FitConfig:
     resolution: int = 256
     """Longest side of the working image in pixels (the paper evaluates at 256)."""
     texture_size: int = 512
-    """UV texture resolution of the outputs."""
+    """UV texture resolution of the outputs (and of stage 3's maps)."""
+    stage2_texture_size: int = 128
+    """UV resolution of the albedo model's maps T^0 in stage 2 (the albedo model's native resolution: stage
+    2's textures are smooth by design)."""
+    stage1: Stage1Config = field(default_factory=Stage1Config)
+    """Stage 1, the landmark fit."""
     lights: LightConfig = field(default_factory=LightConfig)
+    """The light conditions."""
     decouple: DecoupleConfig = field(default_factory=DecoupleConfig)
+    """Light decoupling (f, g, ACE)."""
     weights: Weights = field(default_factory=Weights)
+    """Loss weights."""
     iterations: Iterations = field(default_factory=Iterations)
+    """Steps per stage."""
     learning_rates: LearningRates = field(default_factory=LearningRates)
+    """Adam steps of stages 2 and 3."""
     priors: PriorConfig = field(default_factory=PriorConfig)
+    """Texture priors of stage 3."""
     tone: ToneConfig = field(default_factory=ToneConfig)
+    """Skin tone and the scene's light."""
     texture_pyramid: PyramidConfig = field(default_factory=PyramidConfig)
     """How stage 3 parametrises the UV maps (deface/texture/pyramid.py): levels gated by the photos' pixels per
     texel, so no texel is freer than the photos make it."""
     completion: CompletionConfig = field(default_factory=CompletionConfig)
     """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
-    supersampling: int = 2
-    """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
-    render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between
-    pixel centres (the paper's path tracer averaged several samples per pixel too). 1 = one sample."""
-    render_blur: bool = False
-    """L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
-    their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
-    almost invisible to the loss, which stage 3 then bakes into the texture (BENCHMARKS.md)."""
-    shadows: bool = True
-    """Ray-traced self-shadowing in the renderer."""
-    shadow_rays: int = 128
-    """Rays per vertex for the shadow transfer."""
-    shadow_refresh_every: int = 50
-    """Stage 2 refreshes the shadow transfer at most this often (geometry moves slowly)."""
+    render: RenderSettings = field(default_factory=RenderSettings)
+    """The renderer's settings."""
     seed: int = 0
+    """Seed of every random choice of the fit (torch, numpy, shadow rays, K-means)."""
     threads: int = 1
     """Torch CPU threads for the fit. 1 makes fits bit-exact for a seed (multi-threaded reductions change
     the summation order); more threads trade that for speed. Batches parallelise better across processes."""
@@ -186,15 +296,203 @@ class FitConfig:
     """Which face when several are found (0 = largest)."""
 
 
+RENAMED = {
+    "shadows": "render.shadows",
+    "shadow_rays": "render.shadow_rays",
+    "shadow_refresh_every": "render.shadow_refresh_every",
+    "supersampling": "render.supersampling",
+    "render_blur": "render.render_blur",
+}
+"""Settings that moved into a sub-config, old path -> new: ``override`` and ``from_dict`` still take the old
+paths (scripts, and the params.json of runs made before the move)."""
+
+
 def to_dict(config: Any) -> dict:
     """A JSON-ready dict of a (nested) config."""
     return asdict(config)
 
 
+def from_dict(data: dict, cls: type = None) -> Any:
+    """The config (``cls``, default FitConfig) a ``to_dict`` dict describes, e.g. params.json's "config":
+    every value is checked against its field's type (lists become tuples). Fields the dict leaves out keep
+    their defaults; an unknown field is an error."""
+    cls = cls or FitConfig
+    if not isinstance(data, dict):
+        raise ValueError(f"a config must be a JSON object, got {type(data).__name__}")
+    moved = {old: data[old] for old in RENAMED if cls is FitConfig and old in data}
+    config = _build(cls, {key: value for key, value in data.items() if key not in moved}, "")
+    return override(config, **moved)
+
+
+def _build(cls: type, data: dict, prefix: str) -> Any:
+    hints = _hints(cls)
+    values = {}
+    for key, value in data.items():
+        if key not in hints:
+            raise ValueError(f"unknown config field '{prefix}{key}' (known: {', '.join(sorted(hints))})")
+        hint = hints[key]
+        if is_dataclass(hint):
+            if not isinstance(value, dict):
+                raise ValueError(f"config field '{prefix}{key}' is a group of settings, got {value!r}")
+            values[key] = _build(hint, value, f"{prefix}{key}.")
+        else:
+            values[key] = check_value(value, hint, f"{prefix}{key}")
+    return cls(**values)
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    """Field name -> resolved type of a config dataclass."""
+    hints = get_type_hints(cls)
+    return {f.name: hints[f.name] for f in fields(cls)}
+
+
+def check_value(value: Any, hint: Any, path: str) -> Any:
+    """``value`` as a value of type ``hint`` (JSON lists -> tuples, ints -> floats), or a one-line ValueError."""
+    origin, args = get_origin(hint), get_args(hint)
+    if origin in (Union, UnionType):
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return check_value(value, inner, path)
+    if origin is Literal:
+        if value not in args:
+            raise ValueError(f"{path} must be one of {', '.join(map(str, args))}, got {value!r}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise ValueError(f"{path} must be a list of values, got {value!r}")
+        items = args[:1] * len(value) if len(args) == 2 and args[1] is Ellipsis else args
+        if len(items) != len(value):
+            raise ValueError(f"{path} must have {len(items)} values, got {len(value)}")
+        return tuple(check_value(v, h, f"{path}[{i}]") for i, (v, h) in enumerate(zip(value, items, strict=True)))
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"{path} must be true or false, got {value!r}")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"{path} must be an integer, got {value!r}")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"{path} must be a number, got {value!r}")
+        return float(value)
+    if hint is str:
+        if not isinstance(value, str):
+            raise ValueError(f"{path} must be a string, got {value!r}")
+        return value
+    raise ValueError(f"{path}: cannot set a value of type {hint}")  # pragma: no cover - no such field today
+
+
+def parse_value(text: str, hint: Any, path: str) -> Any:
+    """A command-line string (``--set path=text``) as a value of type ``hint``: true/false (also yes/no,
+    on/off, 1/0), numbers, none (where allowed), comma lists for tuples; one-line ValueError otherwise."""
+    origin, args = get_origin(hint), get_args(hint)
+    word = text.strip()
+    if origin in (Union, UnionType):
+        if word.lower() in ("none", "null") and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return parse_value(text, inner, path)
+    if origin is tuple:
+        parts = [part for part in word.split(",") if part.strip()]
+        items = args[:1] * len(parts) if len(args) == 2 and args[1] is Ellipsis else args
+        if not parts or len(items) != len(parts):
+            count = "one or more" if len(args) == 2 and args[1] is Ellipsis else str(len(items))
+            raise ValueError(f"{path} takes {count} comma-separated values, got '{text}'")
+        return tuple(parse_value(part, h, f"{path}[{i}]") for i, (part, h) in enumerate(zip(parts, items, strict=True)))
+    if hint is bool:
+        truth = {word: True for word in ("true", "yes", "on", "1")} | {w: False for w in ("false", "no", "off", "0")}
+        if word.lower() not in truth:
+            raise ValueError(f"{path} must be true or false, got '{text}'")
+        return truth[word.lower()]
+    if hint in (int, float):
+        try:
+            return hint(word)
+        except ValueError:
+            raise ValueError(f"{path} must be {'an integer' if hint is int else 'a number'}, got '{text}'") from None
+    return check_value(word, hint, path)
+
+
+def field_type(cls: type, path: str) -> Any:
+    """The type of the setting at dotted ``path`` of config class ``cls`` (ValueError for an unknown path)."""
+    parts = path.split(".")
+    for depth, part in enumerate(parts):
+        hints = _hints(cls)
+        if part not in hints:
+            where = ".".join(parts[:depth]) or "the config"
+            raise ValueError(f"unknown setting '{path}': {where} has no field '{part}' "
+                             f"(known: {', '.join(sorted(hints))})")
+        cls = hints[part]
+        if depth < len(parts) - 1 and not is_dataclass(cls):
+            raise ValueError(f"unknown setting '{path}': '{'.'.join(parts[: depth + 1])}' is a single value")
+    if is_dataclass(cls):
+        raise ValueError(f"'{path}' is a group of settings: set one of its fields ({', '.join(_hints(cls))})")
+    return cls
+
+
+def set_from_text(config: Any, assignment: str) -> Any:
+    """``config`` with one ``dotted.path=value`` (as ``--set`` takes it) applied, value parsed by the field's
+    type; old paths of RENAMED are accepted."""
+    path, equals, text = assignment.partition("=")
+    path = RENAMED.get(path.strip(), path.strip())
+    if not equals or not path:
+        raise ValueError(f"--set takes PATH=VALUE (e.g. decouple.epsilon=0.12), got '{assignment}'")
+    value = parse_value(text, field_type(type(config), path), path)
+    return override(config, **{path: value})
+
+
+def flatten(config: Any, prefix: str = "") -> dict[str, Any]:
+    """Every setting of a (nested) config by dotted path, in declaration order."""
+    out = {}
+    for f in fields(config):
+        value = getattr(config, f.name)
+        if is_dataclass(value):
+            out.update(flatten(value, f"{prefix}{f.name}."))
+        else:
+            out[f"{prefix}{f.name}"] = value
+    return out
+
+
+def differences(config: Any, base: Any) -> dict[str, tuple[Any, Any]]:
+    """path -> (value in ``config``, value in ``base``) for every setting where the two differ."""
+    mine, theirs = flatten(config), flatten(base)
+    return {path: (value, theirs[path]) for path, value in mine.items() if value != theirs[path]}
+
+
+def documentation(cls: type = None, prefix: str = "") -> list[tuple[str, Any, str]]:
+    """(dotted path, default, docstring) of every setting of a config class (default FitConfig), from the
+    attribute docstrings in the source: what ``deface fit --help`` lists."""
+    cls = cls or FitConfig
+    docs = _attribute_docs(cls)
+    defaults = cls()
+    out = []
+    for name, hint in _hints(cls).items():
+        if is_dataclass(hint):
+            out += documentation(hint, f"{prefix}{name}.")
+        else:
+            out.append((f"{prefix}{name}", getattr(defaults, name), docs.get(name, "")))
+    return out
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """Field name -> its docstring (the string literal right after the field in the class body), one line."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    body = tree.body[0].body
+    docs = {}
+    for node, after in zip(body, body[1:], strict=False):
+        if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                and isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant)
+                and isinstance(after.value.value, str)):
+            docs[node.target.id] = " ".join(after.value.value.split())
+    return docs
+
+
 def override(config: Any, **changes: Any) -> Any:
-    """A copy with dotted-path changes: ``override(cfg, **{"lights.num_lights": 3})``."""
+    """A copy with dotted-path changes: ``override(cfg, **{"lights.num_lights": 3})`` (old paths of RENAMED
+    are accepted)."""
     for path, value in changes.items():
-        config = _set_path(config, path.split("."), value)
+        config = _set_path(config, RENAMED.get(path, path).split("."), value)
     return config
 
 

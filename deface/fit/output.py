@@ -171,10 +171,10 @@ class FitOutput:
             if view is None:
                 cast_camera, fragments = frame.cast
             else:
-                cast_camera = supersampled_camera(view, self.config.supersampling)
+                cast_camera = supersampled_camera(view, self.config.render.supersampling)
                 fragments = self.renderer.rasterize(frame.geometry.mesh, cast_camera)
             output = shade_supersampled(self.renderer, frame.geometry.mesh, cast_camera, fragments, textures,
-                                        lights, frame.transfer, self.config.supersampling)
+                                        lights, frame.transfer, self.config.render.supersampling)
             if own_lights and view is None:
                 masks = frame.light_masks
             else:

@@ -22,7 +22,7 @@ from deface.fit.log import FitLog
 from deface.fit.output import FinishedTextures, FitOutput, RunRecord
 from deface.fit.scene import SceneParameters, initial_lights
 from deface.fit.scene_light import start_from_scene
-from deface.fit.stage1 import Stage1Config, fit_landmarks
+from deface.fit.stage1 import fit_landmarks
 from deface.fit.stage2 import Stage2Result, run_stage2
 from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
@@ -144,7 +144,7 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     config = _supported_tone(model, config, log)
     log.start("stage 1")
     corr = correspondence_for(model, models_dir=models_dir)
-    result = fit_landmarks(model, corr, target.landmarks, target.size, _stage1_config(config.iterations.stage1))
+    result = fit_landmarks(model, corr, target.landmarks, target.size, config.stage1, config.iterations.stage1)
     log.stop("stage 1")
     landmarks = LandmarkTarget(corr, torch.as_tensor(result.landmarks_2d, dtype=torch.float32),
                                torch.as_tensor(corr.weights, dtype=torch.float32))
@@ -178,11 +178,6 @@ def _supported_tone(model, config: FitConfig, log: FitLog) -> FitConfig:
 def _initial_tone(model, config: FitConfig) -> float:
     """The tone a free-tone fit starts from before the scene is read: the model's own mean skin."""
     return model.albedo.tone.reference_ita if config.tone.free_tone else 0.0
-
-
-def _stage1_config(iterations: int) -> Stage1Config:
-    # Rigid (pose-only) steps: 80 of the default 300, fewer for short runs.
-    return Stage1Config(iterations=iterations, rigid_iterations=min(80, max(1, iterations // 4)))
 
 
 @torch.no_grad()

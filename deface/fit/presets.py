@@ -19,6 +19,8 @@
   what a cast shadow needs; more lights split the lit skin); and 4 octaves of sin/cos features
   on f's input, without which the authors' small MLP on raw (x, y) cannot draw the sharp, thin edges of
   blinds, fingers and leaves and the shadow is baked into the texture. ``paper`` keeps the paper's values.
+  Its stage-3 maps are pyramids gated by the photos' pixels per texel, and unseen texels are completed
+  (docs/textures.md): per-texel maps fill with colour noise where the photo does not resolve texels.
 - ``deface-tone``: ``deface`` that keeps the person's skin tone (``tone``): the albedo's tone is free along a
   flat-prior tone axis and the lights are held to the scene's illuminant (docs/skin-tone.md). Without it
   the lights absorb every skin's tone and all textures come out alike (slope 0.08 vs 0.81 on the skin-tone
@@ -98,7 +100,7 @@ def _deface_tone() -> FitConfig:
 
 
 def _fast() -> FitConfig:
-    return override(_deface(), preset="fast", resolution=192, texture_size=256, shadow_rays=64,
+    return override(_deface(), preset="fast", resolution=192, texture_size=256, **{"render.shadow_rays": 64},
                     iterations=Iterations(stage1=150, stage2=150, stage3=60), **{"decouple.ace_iteration": 50})
 
 
@@ -116,6 +118,21 @@ PRESETS = {
     "nextface-star": lambda: _nextface("nextface-star", restrict_to_face=True),
     "fast": _fast,
 }
+
+
+DESCRIPTIONS = {
+    "paper": "The paper's Table 6: n = 5 lights, f and g, eps = 0.17, 400/200 stage-2/3 steps.",
+    "deface": "The default: the paper's method with M_o = M_R h instead of g, eps = 0.09, n = 3, Fourier f; "
+              "gated texture pyramid and completion of unseen texels.",
+    "deface-tone": "deface that keeps the skin tone: free tone axis, lights held to the scene's illuminant.",
+    "code-images": "The authors' code config for VoxCeleb2 images (L = 1.5, eps = 0.15).",
+    "code-video": "The authors' code config for VoxCeleb2 videos (L = 1.5, eps = 0.15).",
+    "code-portrait": "The authors' code config for the portrait-shadow set (n = 7, eps = 0.09, 1500 stage-2 steps).",
+    "nextface": "Single-light baseline: one light, no f, no g, no priors; L_pho over the whole render mask.",
+    "nextface-star": "NextFace*: nextface with L_pho restricted to the face region h.",
+    "fast": "deface with fewer steps, 192-px working image and 256-px textures: previews and tests.",
+}
+"""One line per preset (``deface presets``); the module docstring says why each differs from the paper."""
 
 
 def names() -> list[str]:

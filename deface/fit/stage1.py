@@ -9,7 +9,8 @@ frames and pose and expression are per frame.
 Steps:
 1. Initial pose per frame from the model's mean-shape landmarks with ``cv2.solvePnP`` (EPnP, then
    Levenberg-Marquardt) at a fixed initial focal length (``initial_fov_degrees`` on the longest side).
-2. ``rigid_iterations`` Adam steps on pose and focal only, then the remaining steps on everything
+2. ``rigid_iterations`` Adam steps (``Stage1Config`` in deface/fit/config.py) on pose and focal only, then
+   the remaining steps on everything
    (coarse to fine). All in float32 on the landmark points only: the model is restricted once to the
    N correspondence points (exact, the model is linear), so a step costs O(T * N * (Ki + Ke)).
 
@@ -23,11 +24,11 @@ import math
 from collections.abc import Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 import torch
 
+from deface.fit.config import Stage1Config
 from deface.fit.guard import StepGuard
 from deface.landmarks.correspondence import Correspondence, landmark_basis
 from deface.landmarks.detect import Landmarks
@@ -37,37 +38,6 @@ from deface.render.camera import Camera, axis_angle_to_matrix
 
 # MediaPipe indices of the outer eye corners (subject's right, subject's left): the inter-ocular distance.
 OUTER_EYE_CORNERS = (33, 263)
-
-
-@dataclass
-class Stage1Config:
-    """Settings of the landmark fit."""
-
-    iterations: int = 300
-    """Total Adam steps (rigid steps included)."""
-    rigid_iterations: int = 80
-    """First steps with identity and expression frozen (pose and focal only)."""
-    lr_rotation: float = 0.01
-    """Adam step for the axis-angle rotation (radians)."""
-    lr_translation: float = 0.005
-    """Adam step for the translation, as a fraction of the initial camera distance."""
-    lr_focal: float = 0.01
-    """Adam step for log(focal)."""
-    lr_identity: float = 0.05
-    """Adam step for identity coefficients (N(0, 1) units)."""
-    lr_expression: float = 0.02
-    """Adam step for expression coefficients (blendshape weights in [0, 1])."""
-    identity_weight: float = 1e-3
-    """w_id of mean(alpha²) relative to L_lan (which is in units of the normalising size)."""
-    expression_weight: float = 1e-3
-    """w_ex of mean(beta) (blendshapes) or mean(beta²) (PCA expressions)."""
-    initial_fov_degrees: float = 20.0
-    """Field of view over the longest image side that sets the initial focal length."""
-    optimise_focal: bool = True
-    """Fit the focal length (shared by all frames); off: keep the initial one."""
-    normalise_by: Literal["face", "image"] = "face"
-    """Size dividing pixel distances in L_lan: the detected landmarks' bounding-box diagonal ("face";
-    the weights then also do not depend on how much of the photo the face fills) or max(W, H) ("image")."""
 
 
 @dataclass(frozen=True)
@@ -149,19 +119,21 @@ def fit_landmarks(
     detections: Sequence[Landmarks],
     image_size: tuple[int, int],
     config: Stage1Config | None = None,
+    iterations: int = 300,
 ) -> Stage1Result:
     """Fit pose, focal, identity and expression to the landmarks of T frames (T = 1 for a photo).
 
     detections: one :class:`Landmarks` per frame (drop frames without a face beforehand);
-    image_size: (W, H) of the images the landmark pixels refer to.
+    image_size: (W, H) of the images the landmark pixels refer to; ``iterations`` Adam steps in all.
     """
     config = config or Stage1Config()
     if not detections or any(d is None for d in detections):
         raise ValueError("fit_landmarks needs one Landmarks per frame (drop frames without a face first)")
-    if config.rigid_iterations > config.iterations:
-        raise ValueError(f"rigid_iterations ({config.rigid_iterations}) > iterations ({config.iterations})")
+    rigid = config.rigid_steps(iterations)
+    if not 0 <= rigid <= iterations:
+        raise ValueError(f"stage1.rigid_iterations ({rigid}) must be within the stage's {iterations} iterations")
     with _single_thread():
-        problem = _Problem(model, corr, detections, image_size, config)
+        problem = _Problem(model, corr, detections, image_size, config, iterations)
         history = problem.run()
         return problem.result(history)
 
@@ -181,8 +153,8 @@ def _single_thread():
 class _Problem:
     """Parameters, targets and the loss of one Stage-1 fit."""
 
-    def __init__(self, model, corr, detections, size, config: Stage1Config):
-        self.config, self.size = config, (int(size[0]), int(size[1]))
+    def __init__(self, model, corr, detections, size, config: Stage1Config, iterations: int):
+        self.config, self.size, self.iterations = config, (int(size[0]), int(size[1])), iterations
         self.blendshapes = model.expression_prior == "blendshape"
         mean, id_basis, ex_basis = landmark_basis(model, corr)
         self.mean = torch.as_tensor(mean)  # [N, 3]
@@ -252,7 +224,7 @@ class _Problem:
 
     def run(self) -> np.ndarray:
         history = []
-        rigid_steps, total = self.config.rigid_iterations, self.config.iterations
+        rigid_steps, total = self.config.rigid_steps(self.iterations), self.iterations
         optimiser = self._optimiser(rigid=True)
         guard = StepGuard(optimiser, "stage 1")  # NaN/Inf rollback (deface/fit/guard.py)
         for step in range(total):

@@ -44,7 +44,7 @@ class FrozenFrame:
 
     index: int  # frame number
     geometry: FrameGeometry  # detached posed mesh and the working-resolution camera
-    camera: Camera  # the camera the fragments were cast with (config.supersampling x finer)
+    camera: Camera  # the camera the fragments were cast with (config.render.supersampling x finer)
     fragments: Fragments  # ray-cast at ``camera``
     transfer: ShadowTransfer | None  # the frame's shadow transfer (None without shadows)
     face_region: torch.Tensor  # [H, W] M_o from stage 2
@@ -69,7 +69,7 @@ def texture_gates(context: StageContext, views: list[TexelView], size: int) -> l
     """The pyramid's gates from the frames' texel density (pixels per texel, summed over frames)."""
     config = context.config.texture_pyramid
     density = np.sum([view.density for view in views], axis=0)
-    return level_gates(density, level_sizes(size, config), config.gated)
+    return level_gates(density, level_sizes(size, config), config.gated, config.gate_power)
 
 
 def initial_textures(context: StageContext) -> Textures:
@@ -146,9 +146,9 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
         camera=Camera(geometry.camera.focal.detach(), geometry.camera.rotation.detach(),
                       geometry.camera.translation.detach(), geometry.camera.width, geometry.camera.height),
     )
-    camera = supersampled_camera(geometry.camera, context.config.supersampling)
+    camera = supersampled_camera(geometry.camera, context.config.render.supersampling)
     fragments = context.renderer.rasterize(geometry.mesh, camera)
-    transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.shadows else None
+    transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.render.shadows else None
     output = _shade(context, geometry.mesh, camera, fragments, initial, transfer)
     coverage = output.mask
     face_region = context.decoupling.face_region(frame, coverage, context.inputs.face_classifier[frame])
@@ -159,7 +159,8 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
 def _shade(context: StageContext, mesh, camera, fragments, textures: Textures, transfer) -> RenderOutput:
     """Shade under the kept lights, box-filtered to the working resolution."""
     return shade_supersampled(context.renderer, mesh, camera, fragments, textures,
-                              context.scene.lights[context.decoupling.kept], transfer, context.config.supersampling)
+                              context.scene.lights[context.decoupling.kept], transfer,
+                              context.config.render.supersampling)
 
 
 def _topology(context: StageContext):
@@ -191,26 +192,28 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, h
             rendered.light_masks, rendered.coverage, form=form), scale)
     if priors.local_prior:
         loss = loss + terms.add("local_prior", weights.local_prior * _local_prior(
-            output, frame.reference, rendered.coverage), scale)
+            output, frame.reference, rendered.coverage, priors.local_prior_weights), scale)
     if priors.human_prior and human_prior is not None:
         loss = loss + terms.add("human_prior", weights.human_prior * human_prior(
             rendered.light_images, rendered.coverage), scale)
     return loss
 
 
-def _local_prior(output: RenderOutput, reference: AlbedoReference, coverage: torch.Tensor) -> torch.Tensor:
-    """The authors' weighting: 5 x diffuse + 6 x specular + 1 x roughness, on screen-space albedo."""
-    return (5.0 * local_prior(output.diffuse, reference.diffuse, coverage)
-            + 6.0 * local_prior(output.specular, reference.specular, coverage)
-            + local_prior(output.roughness, reference.roughness, coverage))
+def _local_prior(output: RenderOutput, reference: AlbedoReference, coverage: torch.Tensor,
+                 weights: tuple[float, float, float]) -> torch.Tensor:
+    """LP on screen-space albedo, ``weights`` x (diffuse, specular, roughness) (the authors' 5 / 6 / 1)."""
+    diffuse, specular, roughness = weights
+    return (diffuse * local_prior(output.diffuse, reference.diffuse, coverage)
+            + specular * local_prior(output.specular, reference.specular, coverage)
+            + roughness * local_prior(output.roughness, reference.roughness, coverage))
 
 
 def _palette(context: StageContext, initial: Textures):
-    if not context.config.priors.global_prior:
+    priors = context.config.priors
+    if not priors.global_prior:
         return None
-    # 8k texels and 3 restarts: the palette of a smooth T^0 is stable well below sklearn's defaults.
-    return kmeans_palette(initial.diffuse, _uv_mask(context, initial), k=context.config.priors.palette_size,
-                          seed=context.config.seed, max_samples=8000, n_init=3)
+    return kmeans_palette(initial.diffuse, _uv_mask(context, initial), k=priors.palette_size,
+                          seed=context.config.seed, max_samples=priors.palette_samples, n_init=priors.palette_restarts)
 
 
 def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:

@@ -36,8 +36,6 @@ from deface.priors.illuminant import IlluminantEstimate
 from deface.render.mesh import Textures
 from deface.render.renderer import Fragments, Renderer, ShadowTransferCache
 
-STAGE2_TEXTURE_SIZE = 128  # the albedo model's native resolution: stage 2's textures are smooth by design
-
 
 @dataclass(frozen=True)
 class LandmarkTarget:
@@ -157,8 +155,10 @@ class StageContext:
     def geometry(self, frame: int) -> FrameGeometry:
         return self.face.geometry(frame)
 
-    def albedo_textures(self, size: int = STAGE2_TEXTURE_SIZE) -> Textures:
-        """The albedo model's maps at the fitted coefficients (and tone, when the tone is free)."""
+    def albedo_textures(self, size: int | None = None) -> Textures:
+        """The albedo model's maps at the fitted coefficients (and tone, when the tone is free), ``size``
+        texels square (default: ``config.stage2_texture_size``)."""
+        size = size or self.config.stage2_texture_size
         ita = self.scene.tone if self.config.tone.free_tone else None
         diffuse, specular = self.model.albedo.textures(self.scene.albedo, size, ita)
         roughness = torch.full((*diffuse.shape[:2], 1), self.model.albedo.roughness_default)
@@ -206,14 +206,14 @@ class StageContext:
                            compose_face(light_images, light_masks), probability, normals)
 
     def _transfer(self, frame: int, mesh, refresh: bool):
-        if not self.config.shadows:
+        if not self.config.render.shadows:
             return None
         cache = self.shadow_caches[frame]
         return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
 
     def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
         return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
-                                rendered.coverage, blur=self.config.render_blur,
+                                rendered.coverage, blur=self.config.render.render_blur,
                                 form=self.config.decouple.loss_form)
 
 

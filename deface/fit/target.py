@@ -42,8 +42,10 @@ class FitTarget:
 
     @staticmethod
     def render_config(config: FitConfig) -> RenderConfig:
-        return RenderConfig(bands=config.lights.bands, shadows=config.shadows, shadow_rays=config.shadow_rays,
-                            seed=config.seed)
+        render = config.render
+        return RenderConfig(bands=config.lights.bands, shadows=render.shadows, shadow_rays=render.shadow_rays,
+                            specular=render.specular, shadow_tolerance_cm=render.shadow_tolerance_cm,
+                            seed=config.seed, shadow_ray_offset=render.shadow_ray_offset)
 
 
 def working_frames(frames: list[np.ndarray], resolution: int) -> tuple[list[np.ndarray], float]:

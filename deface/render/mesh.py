@@ -63,13 +63,7 @@ class Mesh:
 
     def vertex_normals(self) -> torch.Tensor:
         """Unit area-weighted vertex normals [V, 3], differentiable in the vertices (a numba kernel on the CPU)."""
-        if kernels.enabled(self.vertices):
-            return _KernelVertexNormals.apply(self.vertices, self.triangles)
-        face = self.face_normals()  # [F, 3]
-        summed = torch.zeros_like(self.vertices)
-        for corner in range(3):
-            summed = summed.index_add(0, self.triangles[:, corner], face)
-        return summed / summed.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        return kernels.vertex_normals(self.vertices, self.triangles)
 
 
 @dataclass(frozen=True)
@@ -102,52 +96,13 @@ class Textures:
         return Textures(fill(diffuse), fill(specular), fill((roughness,)))
 
 
-def sample_textures(textures: list[torch.Tensor], uv: torch.Tensor) -> list[torch.Tensor]:
-    """Bilinear lookups of several maps [Ht, Wt, C_j] (same size) at ``uv`` [N, 2] -> [N, C_j] each."""
-    if kernels.enabled(uv, *textures):
-        return [sample_texture(texture, uv) for texture in textures]
-    # torch path: one grid_sample for all maps, its cost is mostly per sample, not per channel
-    stacked = sample_texture(torch.cat(textures, -1), uv)
-    return list(stacked.split([texture.shape[2] for texture in textures], 1))
-
-
 def sample_texture(texture: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
     """Bilinear lookup of ``texture`` [Ht, Wt, C] at ``uv`` [N, 2] -> [N, C] (v flipped: row 0 is v = 1).
 
-    grid_sample semantics (align_corners=False, border padding); a numba kernel on the CPU.
+    grid_sample semantics (align_corners=False, border padding); a numba kernel on the CPU
+    (kernels/texture.py).
     """
-    if kernels.enabled(texture, uv):
-        return _BilinearLookup.apply(texture, uv.to(texture.dtype))
-    grid = torch.stack([uv[:, 0] * 2 - 1, 1 - uv[:, 1] * 2], -1).to(texture.dtype)  # [N, 2]
-    image = texture.permute(2, 0, 1)[None]  # [1, C, Ht, Wt]
-    sampled = torch.nn.functional.grid_sample(
-        image, grid[None, None], mode="bilinear", padding_mode="border", align_corners=False
-    )  # [1, C, 1, N]
-    return sampled[0, :, 0].T
+    return kernels.sample_texture(texture, uv)
 
 
-class _KernelVertexNormals(torch.autograd.Function):
-    """The numba path of ``Mesh.vertex_normals``: per-vertex sums over the incident faces, gathered both ways."""
-
-    @staticmethod
-    def forward(ctx, vertices, triangles):
-        ctx.save_for_backward(vertices, triangles)
-        return kernels.vertex_normals_forward(vertices, triangles)
-
-    @staticmethod
-    def backward(ctx, grad):
-        return kernels.vertex_normals_backward(*ctx.saved_tensors, grad), None
-
-
-class _BilinearLookup(torch.autograd.Function):
-    """The numba path of ``sample_texture``: the texture gradient is scattered from the N samples only."""
-
-    @staticmethod
-    def forward(ctx, texture, uv):
-        ctx.save_for_backward(texture, uv)
-        return kernels.bilinear_forward(texture, uv)
-
-    @staticmethod
-    def backward(ctx, grad):
-        texture, uv = ctx.saved_tensors
-        return kernels.bilinear_backward(texture, uv, grad, ctx.needs_input_grad[0], ctx.needs_input_grad[1])
+sample_textures = kernels.sample_textures

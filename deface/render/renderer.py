@@ -16,7 +16,6 @@ Background pixels are 0 in every output. Everything runs on the tensors' device;
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -27,13 +26,7 @@ from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures, sample_textures
 from deface.render.raycast import RayScene
-from deface.render.sh import (
-    cosine_lobe_coefficients,
-    kernel_constants,
-    phong_lobe_filter,
-    sh_band_sums,
-    sh_basis_rows,
-)
+from deface.render.sh import cosine_lobe_coefficients, sh_band_sums
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 
@@ -170,10 +163,10 @@ class Renderer:
             x1, y1 = min(hi[0] + 1, width), min(hi[1] + 1, height)
         if x0 >= x1 or y0 >= y1:
             return triangle_id
-        if in_front and kernels.enabled(pixels):
+        if in_front:
             # only pixels inside some triangle's projected box (a ray elsewhere cannot hit): ~half as many rays
             flat = kernels.triangle_box_pixels(pixels, mesh.triangles, height, width)
-        else:
+        else:  # a vertex behind the camera: the whole box
             ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
             flat = (ys * width + xs).reshape(-1)
         origins, directions = _pixel_rays(camera, flat)
@@ -215,13 +208,13 @@ class Renderer:
         coeffs = sh_lights.permute(1, 0, 2).reshape(bands * bands, num_lights * 3)  # [B², K*3]
 
         # Only vertices of covered triangles are shaded: corners are renumbered into that subset.
-        used, local = _renumber(corners, mesh.num_vertices)  # [U], [N, 3]
+        used, local = kernels.renumber(corners, mesh.num_vertices)  # [U], [N, 3]
         normals_v = mesh.vertex_normals().index_select(0, used).to(dtype)  # [U, 3]
         irradiance_v = _vertex_irradiance(normals_v, coeffs, bands, transfer, used)  # [U, K*3]
 
         uv_corners = mesh.triangle_uvs.index_select(0, fragments.covered_triangles)  # [N, 3]
-        camera_z = camera.to_camera(mesh.vertices.index_select(0, used))[:, 2:]  # [U, 1]
-        if self._fused(sh_lights, textures, mesh, bary):
+        camera_z = camera.to_camera(mesh.vertices.index_select(0, used))[:, 2:].to(dtype)  # [U, 1]
+        if self.config.specular:
             positions = mesh.vertices.index_select(0, used).to(dtype)  # [U, 3]
             bands_v = _specular_bands(positions, normals_v, camera, coeffs, bands)  # [U, B*K*3]
             visibility = (
@@ -229,9 +222,8 @@ class Renderer:
                 if transfer is not None
                 else normals_v.new_ones(normals_v.shape[0], 1)
             )
-            plain = torch.cat([irradiance_v, normals_v, camera_z.to(dtype), visibility], 1)  # [U, K*3 + 5]
-            images, *buffers = _KernelShade.apply(
-                plain,
+            images, *buffers = kernels.shade(
+                kernels.plain_values(irradiance_v, normals_v, camera_z, visibility),  # [U, K*3 + 5]
                 bands_v.reshape(-1, bands, num_lights * 3),
                 mesh.uvs.to(dtype),
                 bary,
@@ -241,34 +233,19 @@ class Renderer:
                 (covered, local, uv_corners),
                 (height, width),
             )
-            return RenderOutput(images, fragments.mask, *buffers[:3], fragments.triangle_id, *buffers[3:])
+            named = dict(zip(kernels.SCREEN_BUFFERS, buffers, strict=True))
+            return RenderOutput(images=images, mask=fragments.mask, triangle_id=fragments.triangle_id, **named)
 
-        # One gather for every per-vertex quantity (index_select's backward is a fast index_add).
-        per_vertex = [irradiance_v, normals_v, camera_z.to(dtype)]
-        if self.config.specular:
-            positions = mesh.vertices.index_select(0, used).to(dtype)  # [U, 3]
-            bands_v = _specular_bands(positions, normals_v, camera, coeffs, bands)  # [U, B*K*3]
-            if transfer is not None:
-                per_vertex.append(transfer.visibility.to(dtype).index_select(0, used)[:, None])
-        sizes = [t.shape[1] for t in per_vertex]
-        pixel_values = _interpolate(torch.cat(per_vertex, 1), local, bary).split(sizes, 1)
-        irradiance, normals, depth = pixel_values[:3]  # [N, K*3], [N, 3], [N, 1]
+        # Lambertian only: one gather for every per-vertex quantity (index_select's backward is a fast index_add)
+        pixel_values = kernels.interpolate(torch.cat([irradiance_v, normals_v, camera_z], 1), local, bary)
+        irradiance, normals, depth = pixel_values.split([num_lights * 3, 3, 1], 1)  # [N, K*3], [N, 3], [N, 1]
         normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-
-        uv = _interpolate(mesh.uvs.to(dtype), uv_corners, bary)  # [N, 2]
+        uv = kernels.interpolate(mesh.uvs.to(dtype), uv_corners, bary)  # [N, 2]
         diffuse, specular, roughness = sample_textures([textures.diffuse, textures.specular, textures.roughness], uv)
-
-        if self.config.specular:
-            lobe = phong_lobe_filter(roughness[:, 0], bands).to(dtype)  # [N, B], per-texel roughness
-            lit = _filtered_interpolation(bands_v, local, bary, lobe)  # [N, K*3]
-            visibility = pixel_values[3] if transfer is not None else lit.new_ones(lit.shape[0], 1)
-            radiance = _radiance(irradiance, diffuse, lit, visibility, specular)  # [N, K*3]
-        else:
-            radiance = (irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]).flatten(1)
+        radiance = (irradiance.reshape(-1, num_lights, 3) * (diffuse / math.pi)[:, None]).flatten(1)
 
         def screen(values: torch.Tensor) -> torch.Tensor:  # [N, C] -> [H, W, C], zeros elsewhere
-            full = torch.zeros(height * width, values.shape[1], dtype=values.dtype, device=values.device)
-            return full.index_copy(0, covered, values).reshape(height, width, -1)
+            return kernels.to_screen(values, covered, (height, width))
 
         images = screen(radiance).reshape(height, width, num_lights, 3).permute(2, 0, 1, 3)
         return RenderOutput(
@@ -281,17 +258,6 @@ class Renderer:
             diffuse=screen(diffuse),
             specular=screen(specular),
             roughness=screen(roughness),
-        )
-
-    def _fused(self, sh_lights, textures: Textures, mesh: Mesh, bary: torch.Tensor) -> bool:
-        """Whether ``shade`` runs the fused numba pixel kernel (specular on, one dtype and size, fixed uvs)."""
-        maps = (textures.diffuse, textures.specular, textures.roughness)
-        return (
-            self.config.specular
-            and not mesh.uvs.requires_grad
-            and kernels.enabled(sh_lights, bary, *maps)
-            and len({t.dtype for t in (sh_lights, bary, *maps)}) == 1
-            and len({t.shape[:2] for t in maps}) == 1  # one bilinear set-up serves the three maps
         )
 
     def render(
@@ -338,19 +304,7 @@ def _vertex_irradiance(
     lobe = cosine_lobe_coefficients(bands).to(coeffs)  # [B²]
     if transfer is not None:
         _check_transfer(transfer, bands, normals.shape[0] if subset is None else None)
-    if kernels.enabled(normals, coeffs) and normals.dtype == coeffs.dtype:
-        occluded = None if transfer is None else transfer.occluded
-        return _KernelIrradiance.apply(normals, coeffs, lobe, occluded, subset)
-    # transfer A_l Y_lm(n) - O[lm] per vertex, channel-first [B², U] like the basis rows (mixed layouts make
-    # the element-wise ops slow), then one product with the lights: fewer [U, B²] x [B², K*3] products
-    # forward and backward than filtering the lights and subtracting a second product
-    transfer_rows = sh_basis_rows(normals, bands) * lobe[:, None]  # [B², U]
-    if transfer is not None:
-        occluded = transfer.occluded_rows  # [B²', V]
-        if subset is not None:
-            occluded = occluded.index_select(1, subset)
-        transfer_rows = transfer_rows - occluded[: bands * bands].to(coeffs.dtype)
-    return transfer_rows.T @ coeffs
+    return kernels.sh_irradiance(normals, coeffs, lobe, transfer, subset)
 
 
 def _check_transfer(transfer: ShadowTransfer, bands: int, num_vertices: int | None) -> None:
@@ -359,25 +313,6 @@ def _check_transfer(transfer: ShadowTransfer, bands: int, num_vertices: int | No
     if transfer.bands < bands or (num_vertices is not None and vertices != num_vertices):
         wanted = f"{bands} bands" + ("" if num_vertices is None else f" for {num_vertices} vertices")
         raise ValueError(f"shadow transfer has {transfer.bands} bands for {vertices} vertices, need >= {wanted}")
-
-
-class _KernelIrradiance(torch.autograd.Function):
-    """The numba path of ``_vertex_irradiance``: SH basis, shadowed transfer and the product with the lights
-    per block of normals (no [B², U] rows, no serial matmuls); gradients to normals and coeffs."""
-
-    @staticmethod
-    def forward(ctx, normals, coeffs, lobe, occluded, subset):
-        ctx.save_for_backward(normals, coeffs)
-        ctx.inputs = (lobe, occluded, subset, kernel_constants(math.isqrt(lobe.shape[0])))
-        return kernels.sh_irradiance_forward(normals, coeffs, *ctx.inputs)
-
-    @staticmethod
-    def backward(ctx, grad):
-        normals, coeffs = ctx.saved_tensors
-        lobe, occluded, subset, constants = ctx.inputs
-        need = ctx.needs_input_grad[:2]
-        grads = kernels.sh_irradiance_backward(normals, coeffs, lobe, occluded, subset, grad, constants, *need)
-        return *grads, None, None, None
 
 
 class ShadowTransferCache:
@@ -429,211 +364,15 @@ def _specular_bands(
     Lambda_0 = 1 and barycentrics sum to 1, a constant environment still gives exactly k_s L.
     """
     centre = camera.center_in_model().to(positions)
-    if kernels.enabled(positions, normals, centre) and positions.dtype == normals.dtype:
-        reflected = _KernelReflection.apply(positions, normals, centre)
-    else:
-        view = centre - positions
-        view = view / view.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # [U, 3] towards the camera
-        reflected = 2 * (normals * view).sum(-1, keepdim=True) * normals - view  # [U, 3]
-        reflected = reflected / reflected.norm(dim=-1, keepdim=True).clamp_min(1e-12)  # unit for the SH
+    reflected = kernels.reflect(positions, normals, centre)
     return sh_band_sums(reflected.to(coeffs.dtype), coeffs).reshape(positions.shape[0], -1)
-
-
-class _KernelReflection(torch.autograd.Function):
-    """The numba path of the mirrored view directions in ``_specular_bands`` (the same formulas, one loop
-    per vertex instead of ~12 small ops and their backward): positions, normals [U, 3], centre [3]."""
-
-    @staticmethod
-    def forward(ctx, positions, normals, centre):
-        ctx.save_for_backward(positions, normals, centre)
-        return kernels.reflect_forward(positions, normals, centre)
-
-    @staticmethod
-    def backward(ctx, grad):
-        return kernels.reflect_backward(*ctx.saved_tensors, grad)
-
-
-def _radiance(irradiance, diffuse, lit, visibility, specular) -> torch.Tensor:
-    """Diffuse plus shadowed specular radiance of the covered pixels, [N, K*3]:
-    irradiance [N, K*3] * diffuse [N, 3] / pi + lit [N, K*3] * visibility [N, 1] * specular [N, 3]."""
-    num = irradiance.shape[0]
-    diffuse_part = irradiance.reshape(num, -1, 3) * (diffuse / math.pi)[:, None]
-    return (diffuse_part + (lit * visibility).reshape(num, -1, 3) * specular[:, None]).reshape(num, -1)
-
-
-class _KernelShade(torch.autograd.Function):
-    """The numba path of ``Renderer.shade``'s pixel stage, fused: per covered pixel it interpolates the
-    per-vertex values, looks up the three maps, applies the Phong filter and writes every screen buffer;
-    the backward is one pass over the pixels that also scatters the per-vertex gradients (kernels.shade_backward).
-
-    Inputs: plain [U, K*3 + 5] (irradiance, normal, camera z, visibility per used vertex), bands_v
-    [U, B, K*3], uvs [Nuv, 2], bary [N, 3], the diffuse / specular / roughness maps; pixels = (covered
-    [N], corners [N, 3] into U, uv corners [N, 3]); size = (H, W). The formulas are those of the torch
-    path of ``shade`` (the reference, compared in tests/test_render_kernels.py).
-    """
-
-    @staticmethod
-    def forward(ctx, plain, bands_v, uvs, bary, diffuse, specular, roughness, pixels, size):
-        ctx.set_materialize_grads(False)
-        ctx.save_for_backward(plain, bands_v, uvs, bary, diffuse, specular, roughness)
-        maps = (diffuse, specular, roughness)
-        outputs, ctx.lit = kernels.shade_forward(plain, bands_v, uvs, bary, maps, pixels, size)
-        ctx.pixels, ctx.width = pixels, size[1]
-        return tuple(outputs)
-
-    @staticmethod
-    def backward(ctx, *grads):
-        plain, bands_v, uvs, bary, *maps = ctx.saved_tensors
-        grad_plain, grad_bands, grad_bary, grad_maps = kernels.shade_backward(
-            plain, bands_v, uvs, bary, maps, ctx.pixels, ctx.width, grads, ctx.needs_input_grad[4:7], ctx.lit
-        )
-        return grad_plain, grad_bands, None, grad_bary, *grad_maps, None, None
-
-
-def _filtered_interpolation(
-    values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor, lobe: torch.Tensor
-) -> torch.Tensor:
-    """out[p] = sum_i sum_l bary[p, i] lobe[p, l] S[corner_i(p), l]: values S [U, B*C] (band-major),
-    corners [N, 3], bary [N, 3], lobe [N, B] -> [N, C]. numba kernel on the CPU, sparse torch elsewhere."""
-    if kernels.enabled(values, bary, lobe) and values.dtype == bary.dtype == lobe.dtype:
-        return _KernelInterpolation.apply(values, corners, bary, lobe)
-    return _FilteredInterpolation.apply(values, corners, bary, lobe)
-
-
-class _KernelInterpolation(torch.autograd.Function):
-    """The numba path of ``_filtered_interpolation`` (kernels.py); no sparse matrices, no [N, B*C] buffers."""
-
-    @staticmethod
-    def forward(ctx, values, corners, bary, lobe):
-        ctx.save_for_backward(values, corners, bary, lobe)
-        return kernels.interpolate_forward(values.reshape(values.shape[0], lobe.shape[1], -1), corners, bary, lobe)
-
-    @staticmethod
-    def backward(ctx, grad):
-        values, corners, bary, lobe = ctx.saved_tensors
-        per_band = values.reshape(values.shape[0], lobe.shape[1], -1)  # [U, B, C]
-        grad_values = grad_bary = grad_lobe = None
-        if ctx.needs_input_grad[2] or ctx.needs_input_grad[3]:
-            grad_bary, grad_lobe = kernels.interpolate_backward_corners(per_band, corners, bary, lobe, grad)
-        if ctx.needs_input_grad[0]:
-            grad_values = kernels.interpolate_backward_values(per_band.shape[0], corners, bary, lobe, grad)
-            grad_values = grad_values.reshape(values.shape)
-        return grad_values, None, grad_bary, grad_lobe
-
-
-class _FilteredInterpolation(torch.autograd.Function):
-    """Reference (torch) path of ``_filtered_interpolation``: a sparse [N, U*B] matrix with 3B weights
-    bary[p, i] lobe[p, l] per pixel times S viewed as [U*B, C].
-
-    No [N, B*C] per-pixel buffer is materialised in the forward pass (such buffers cost more in page
-    faults than in arithmetic).
-    """
-
-    @staticmethod
-    def forward(ctx, values, corners, bary, lobe):
-        num, bands = lobe.shape
-        channels = values.shape[1] // bands
-        weights = (bary[:, :, None] * lobe[:, None, :]).reshape(-1)  # [N*3*B]
-        columns = (corners[:, :, None] * bands + torch.arange(bands, device=corners.device)).reshape(-1)
-        rows = torch.arange(0, weights.numel() + 1, 3 * bands, device=corners.device)
-        matrix = _csr(rows, columns, weights, size=(num, values.shape[0] * bands))
-        flat = values.reshape(-1, channels)  # [U*B, C]
-        ctx.save_for_backward(values, corners, bary, lobe, rows, columns)
-        return matrix @ flat
-
-    @staticmethod
-    def backward(ctx, grad):
-        values, corners, bary, lobe, rows, columns = ctx.saved_tensors
-        num, bands = lobe.shape
-        grad = grad.contiguous()
-        grad_values = grad_bary = grad_lobe = None
-        if ctx.needs_input_grad[2] or ctx.needs_input_grad[3]:
-            pattern = _csr(rows, columns, grad.new_zeros(columns.numel()), size=(num, values.shape[0] * bands))
-            flat = values.reshape(-1, grad.shape[1])
-            # d out[p] / d weight[p, i, l] = S[corner_i, l]: (grad @ S^T) sampled at the sparsity pattern
-            grad_weights = torch.sparse.sampled_addmm(pattern, grad, flat.T, beta=0.0).values()
-            grad_weights = grad_weights.reshape(num, 3, bands)
-            grad_bary = (grad_weights * lobe[:, None, :]).sum(-1)
-            grad_lobe = (grad_weights * bary[:, :, None]).sum(1)
-        if ctx.needs_input_grad[0]:
-            # grad S[v, l] = sum_{(p, i): corner_i(p) = v} bary[p, i] lobe[p, l] grad[p]: a [U, N] CSR
-            # matrix of barycentrics (3 per pixel, sorted by vertex) times [N, B*C] lobe-weighted grads
-            corner_flat = corners.reshape(-1)
-            order = torch.argsort(corner_flat, stable=True)
-            counts = torch.bincount(corner_flat, minlength=values.shape[0])
-            crow = torch.cat([counts.new_zeros(1), counts.cumsum(0)])
-            transpose = _csr(crow, order // 3, bary.reshape(-1)[order], size=(values.shape[0], num))
-            weighted = (lobe[:, :, None] * grad[:, None, :]).reshape(num, -1)  # [N, B*C]
-            grad_values = transpose @ weighted
-        return grad_values, None, grad_bary, grad_lobe
-
-
-def _csr(rows: torch.Tensor, columns: torch.Tensor, values: torch.Tensor, size: tuple) -> torch.Tensor:
-    """A sparse CSR matrix; indices are built by this module, so torch's invariant checks are skipped."""
-    with warnings.catch_warnings():  # torch warns that CSR support is "beta" on every construction
-        warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta state")
-        return torch.sparse_csr_tensor(rows, columns, values, size=size, check_invariants=False)
-
-
-def _renumber(corners: torch.Tensor, num_vertices: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The vertices used by ``corners`` [N, 3] (sorted, [U]) and the corners renumbered into them."""
-    if kernels.enabled(corners):
-        return kernels.renumber(corners, num_vertices)
-    flags = torch.zeros(num_vertices, dtype=torch.bool, device=corners.device)
-    flags[corners.reshape(-1)] = True
-    used = torch.nonzero(flags)[:, 0]  # [U]
-    new_index = torch.cumsum(flags, 0) - 1  # [V], valid where flags
-    return used, new_index[corners]
 
 
 def _barycentrics(mesh: Mesh, camera: Camera, tri: torch.Tensor, covered: torch.Tensor, projected=None) -> torch.Tensor:
     """Perspective-correct barycentrics [N, 3] of the pixel centres ``covered`` in triangles ``tri``
     (``projected``: camera.project(mesh.vertices) if already computed)."""
     pixels, depth = camera.project(mesh.vertices) if projected is None else projected  # [V, 2], [V]
-    width = camera.width
-    if kernels.enabled(pixels, depth) and pixels.dtype == depth.dtype:
-        return _KernelBarycentrics.apply(pixels, depth, (mesh.triangles, tri, covered, (camera.height, width)))
-    corners = mesh.triangles.index_select(0, tri)  # [N, 3]
-    q = torch.stack([covered % width, covered // width], -1).to(pixels.dtype) + 0.5  # [N, 2]
-    flat = corners.reshape(-1)
-    p = pixels.index_select(0, flat).reshape(-1, 3, 2)  # [N, 3, 2]
-    z = depth.index_select(0, flat).reshape(-1, 3)  # [N, 3]
-
-    def cross2(a, b):
-        return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-    d0, d1, d2 = p[:, 0] - q, p[:, 1] - q, p[:, 2] - q
-    screen = torch.stack([cross2(d1, d2), cross2(d2, d0), cross2(d0, d1)], -1)  # [N, 3] ~ 2 x areas
-    area = screen.sum(-1, keepdim=True)
-    tiny = torch.finfo(p.dtype).tiny
-    area = torch.where(area.abs() < tiny, torch.full_like(area, tiny), area)
-    weights = screen / area / z  # perspective correction: screen barycentrics / depth
-    return weights / weights.sum(-1, keepdim=True)
-
-
-class _KernelBarycentrics(torch.autograd.Function):
-    """The numba path of ``_barycentrics``: projected vertices [V, 2], their depths [V], and the pixels =
-    (triangles [F, 3], triangle id [N] and flat index [N] of each covered pixel, image (H, W)); corners and
-    pixel centres are looked up (and the corner gradients scattered) in the kernels."""
-
-    @staticmethod
-    def forward(ctx, pixels, depth, covered):
-        ctx.save_for_backward(pixels, depth)
-        ctx.covered = covered
-        return kernels.barycentrics_forward(pixels, depth, covered)
-
-    @staticmethod
-    def backward(ctx, grad):
-        return (*kernels.barycentrics_backward(*ctx.saved_tensors, ctx.covered, grad), None)
-
-
-def _interpolate(values: torch.Tensor, corners: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
-    """sum_i bary_i values[corners_i]: values [V, C], corners [N, 3], bary [N, 3] -> [N, C]."""
-    if kernels.enabled(values, bary) and values.dtype == bary.dtype:
-        return _KernelInterpolation.apply(values, corners, bary, bary.new_ones(bary.shape[0], 1))
-    out = values.index_select(0, corners[:, 0]) * bary[:, :1]
-    out = out + values.index_select(0, corners[:, 1]) * bary[:, 1:2]
-    return out + values.index_select(0, corners[:, 2]) * bary[:, 2:3]
+    return kernels.barycentrics(pixels, depth, (mesh.triangles, tri, covered, (camera.height, camera.width)))
 
 
 def _pixel_rays(camera: Camera, flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -642,16 +381,7 @@ def _pixel_rays(camera: Camera, flat: np.ndarray) -> tuple[np.ndarray, np.ndarra
     focal = float(camera.focal.detach())
     rot = camera.rotation_matrix.detach().cpu().numpy().astype(np.float32)
     origin = camera.center_in_model().detach().cpu().numpy().astype(np.float32)
-    if kernels.enabled(camera.focal):
-        dirs = kernels.pixel_directions(flat, (camera.height, camera.width), focal, rot)
-        return np.broadcast_to(origin, dirs.shape), dirs
-    ys, xs = np.divmod(flat, camera.width)
-    dirs_cam = np.empty((xs.shape[0], 3), dtype=np.float32)
-    dirs_cam[:, 0] = (xs + 0.5 - camera.width / 2) / focal
-    dirs_cam[:, 1] = (ys + 0.5 - camera.height / 2) / focal
-    dirs_cam[:, 2] = 1.0
-    dirs = dirs_cam @ rot  # camera -> model: R^T d
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    dirs = kernels.pixel_directions(flat, (camera.height, camera.width), focal, rot)
     return np.broadcast_to(origin, dirs.shape), dirs
 
 

@@ -7,8 +7,9 @@ per-texel colour noise (speckle). Here a map is
 
     T = T^0 + sum_l up(g_l * P_l),     level l of side N / 2^l, up = bilinear upsampling to N,
 
-with gate g_l = clip(D_l, 0, 1), D_l the pixels per level-l texel (the frames' texel density summed over
-frames, :attr:`deface.texture.confidence.TexelView.density`, pooled to the level and times 4^l). A level is
+with gate g_l = clip(D_l, 0, 1)^p (p = ``gate_power``), D_l the pixels per level-l texel (the frames' texel
+density summed over frames, :attr:`deface.texture.confidence.TexelView.density`, pooled to the level and times
+4^l). A level is
 free where the photos give it at least a pixel per texel and damped in proportion where they give less, so
 the detail a photo shows (stubble, moles, wrinkles at its resolution) is fitted at the finest level it
 supports and nothing finer. The coarsest level is always free (gate 1). With ``levels = 1`` the map is the
@@ -34,6 +35,12 @@ class PyramidConfig:
     """No level is coarser than this many texels per side (fewer levels on small maps)."""
     gated: bool = True
     """Damp each level where the photos give less than a pixel per texel of that level (see the module doc)."""
+    gate_power: float = 2.0
+    """Gates are clip(D_l, 0, 1) ** gate_power. Adam steps every parameter by about its learning rate whatever
+    its gradient, so a gate is a per-texel speed limit, and a linear one (power 1) still let sparsely seen
+    texels drift: on two benchmark pairs power 1 / 2 / 3 left speckle 4.6 / 2.0 / 1.4 (per-texel maps: 8.0) and
+    fine contrast 1.29 / 1.06 / 1.02 times the photo's (per-texel: 1.72), with the same UV consistency and target
+    synthesis; 3 starts to lose the photo's own detail on one pair (0.92), so 2 (docs/textures.md)."""
 
 
 def level_sizes(size: int, config: PyramidConfig) -> list[int]:
@@ -44,9 +51,9 @@ def level_sizes(size: int, config: PyramidConfig) -> list[int]:
     return sizes
 
 
-def level_gates(density: np.ndarray, sizes: list[int], gated: bool = True) -> list[torch.Tensor]:
-    """[s, s] gate per level: clip(pixels per level texel, 0, 1); the coarsest level (and every level when
-    not ``gated``) is 1. ``density`` [N, N] is pixels per texel at the finest level."""
+def level_gates(density: np.ndarray, sizes: list[int], gated: bool = True, power: float = 1.0) -> list[torch.Tensor]:
+    """[s, s] gate per level: clip(pixels per level texel, 0, 1) ** power; the coarsest level (and every level
+    when not ``gated``) is 1. ``density`` [N, N] is pixels per texel at the finest level."""
     full = torch.as_tensor(np.asarray(density), dtype=torch.float32)[None, None]
     gates = []
     for index, side in enumerate(sizes):
@@ -55,7 +62,7 @@ def level_gates(density: np.ndarray, sizes: list[int], gated: bool = True) -> li
             continue
         factor = sizes[0] // side
         per_level_texel = F.avg_pool2d(full, factor)[0, 0] * factor**2 if factor > 1 else full[0, 0]
-        gates.append(per_level_texel.clamp(0, 1))
+        gates.append(per_level_texel.clamp(0, 1) ** power)
     return gates
 
 
