@@ -12,10 +12,6 @@ step. So the fit starts where the scene says it is:
   divided by W and by ``LIT_SKIN_SHADING``. Stage 2 then refines both;
 - the skin pixels of the cheeks and forehead are kept (``SceneLight.regions``) for the scene-light prior's
   level term.
-At ACE, when f's masks exist, the tone restarts from the same measure taken only where the brightest kept
-light's mask is above one half (:func:`restart_tone_in_key_light`): a foreign cast shadow (leaves, fingers, a
-brim) darkens many of the cheek and forehead pixels without making them dark enough to be left out, and the
-tone started from them was up to 25 degrees darker than from the same photo without the shadow.
 """
 
 from __future__ import annotations
@@ -65,32 +61,6 @@ def photo_skin_ita(frames_srgb: list[np.ndarray], regions: list[np.ndarray], whi
     lit = lit_skin(srgb) & (luminance <= np.percentile(luminance, 100 * KEY_QUANTILE))
     albedo = np.median(srgb_to_linear(srgb[lit]), axis=0) / (np.asarray(white) * LIT_SKIN_SHADING)
     return ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
-
-
-KEY_MASK = 0.5  # pixels where the brightest kept light's mask is above this are in its light
-
-
-@torch.no_grad()
-def restart_tone_in_key_light(context) -> None:
-    """At ACE: the tone restarts from the photo's skin where f gives the brightest kept light (in place;
-    ``context``: :class:`~deface.fit.state.StageContext`)."""
-    light = context.inputs.scene_light
-    if not context.config.tone.free_tone or light is None or light.regions is None:
-        return
-    kept = context.decoupling.kept
-    peak = peak_white(context.scene.lights[kept], front_directions())
-    key = int((peak @ torch.as_tensor(LUMINANCE, dtype=peak.dtype)).argmax())
-    regions = []
-    for frame, tone_region in enumerate(light.regions):
-        _, fragments = context.face.fragments(frame)
-        masks = context.decoupling.light_masks(frame, fragments.mask)
-        regions.append(tone_region.numpy() & (masks[key].numpy() > KEY_MASK))
-    ita = photo_skin_ita(context.target.frames_srgb, regions, light.illuminant.white)
-    if ita is None:
-        return
-    context.scene.tone.fill_(ita)
-    context.model.albedo.tone.clamp_(context.scene.tone, context.config.tone.ita_range)
-    context.log.info(f"skin tone restarts at ITA {float(context.scene.tone):.1f} (the skin in the key light's mask)")
 
 
 def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant, config, log) -> SceneLight:

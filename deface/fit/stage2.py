@@ -13,7 +13,6 @@ import torch
 
 from deface.decouple.ace import light_areas
 from deface.fit.guard import StepGuard
-from deface.fit.scene_light import restart_tone_in_key_light
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.losses import decouple as decouple_losses
 
@@ -37,7 +36,6 @@ def run_stage2(context: StageContext) -> Stage2Result:
     for step in range(config.iterations.stage2):
         if step == ace_at and decoupling.light_field is not None:
             _apply_ace(context)
-            restart_tone_in_key_light(context)
         optimiser.zero_grad(set_to_none=True)
         refresh = step % config.render.shadow_refresh_every == 0
         terms = LossTerms()
