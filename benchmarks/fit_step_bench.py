@@ -24,8 +24,8 @@ from deface.fit.config import override
 from deface.fit.log import FitLog
 from deface.fit.stage2 import _stage2_loss
 from deface.fit.target import FitTarget
+from deface.fit.texels import frame_views
 from deface.io.images import load_image
-from deface.models import load_face_model
 from deface.paths import shared_dir
 
 
@@ -47,8 +47,7 @@ def main() -> None:
         config = override(config, **{"render.supersampling": args.supersampling})
     log = FitLog(quiet=True)
     work, landmarks, scale, _ = pipeline.detect([load_image(args.photo)], config, str(args.photo), False)
-    context = pipeline._stage1(load_face_model("ict"), FitTarget(work, landmarks, scale), config, log)
-    pipeline._face_classifier(context, config, None, log)
+    context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=log)
     _stage2_loss(context, True, True).backward()  # shadow transfer and caches
     step = _stage2_step(context) if args.stage == 2 else _stage3_step(context, args.reference_terms)
     walls, cpus = [], []
@@ -70,7 +69,7 @@ def _stage2_step(context):
 def _stage3_step(context, reference_terms: bool = False):
     initial = stage3.initial_textures(context)
     frozen = stage3.freeze_frames(context, initial)
-    views = stage3.frame_views(context.model, frozen, initial.diffuse.shape[0])
+    views = frame_views(context.model, frozen, initial.diffuse.shape[0])
     parameters = stage3.TextureParameters(initial, stage3.texture_gates(context, views, initial.diffuse.shape[0]))
 
     def switch():  # the fast path decides at objective construction (texture terms) and per step (LP)

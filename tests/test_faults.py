@@ -173,7 +173,7 @@ def test_a_second_writer_of_the_same_output_skips_it(photo, tmp_path, fake_fit):
     assert "0 of 1 input(s) done, 0 failed, 1 left to another run" in lines[-1]
     code, lines = _fit(photo, "-o", out)  # the lock is gone with its holder
     assert code == 0 and (out / "face" / "params.json").is_file()
-    assert sorted(p.name for p in out.iterdir()) == ["batch.jsonl", "face"]
+    assert sorted(p.name for p in out.iterdir()) == ["batch.jsonl", "face", "index.html"]
 
 
 def test_two_processes_writing_the_same_output(photo, tmp_path):
@@ -318,8 +318,7 @@ def test_nan_in_stage2_loss_is_recovered_and_recorded(tiny_fit, monkeypatch):
     monkeypatch.setattr(stage2, "_stage2_loss", poisoned)
     log = FitLog(quiet=True)
     result = fit_target(FitTarget([face.image_srgb], [face.landmarks], 1.0), config, log=log)
-    scene = result.context.scene
-    assert all(torch.isfinite(t).all() for t in (scene.identity, scene.lights, scene.albedo, scene.expression))
+    assert all(torch.isfinite(t).all() for t in (result.identity, result.lights, result.albedo, result.expression))
     assert torch.isfinite(result.textures.diffuse).all()
     assert [n for n in log.notes if n.startswith("stage 2: non-finite loss or parameters at step 3")]
 

@@ -5,6 +5,8 @@ and sit off the axis (another chroma), so the check does not pass by constructio
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -14,7 +16,7 @@ from deface.eval.synthetic import directional_sh, true_landmarks
 from deface.fit import presets
 from deface.fit.config import override
 from deface.fit.log import FitLog
-from deface.fit.pipeline import fit_target
+from deface.fit.pipeline import run_stages
 from deface.fit.stage2 import _stage2_loss
 from deface.fit.target import FitTarget
 from deface.io.images import linear_to_srgb
@@ -61,11 +63,11 @@ def render_scene(ita: float, cct: float, size: int = 96):
 def fit_scene(ita: float, cct: float, preset: str = "deface-tone", **changes):
     image, landmarks = render_scene(ita, cct)
     config = override(presets.get(preset), **{**SHORT, **changes})
-    return fit_target(FitTarget([image], [landmarks], 1.0), config, log=FitLog(quiet=True))
+    return run_stages(FitTarget([image], [landmarks], 1.0), config, log=FitLog(quiet=True))
 
 
-def recovered_ita(result) -> float:
-    return texture_ita(linear_to_srgb(result.textures.diffuse.numpy().clip(0, 1)))
+def recovered_ita(state) -> float:
+    return texture_ita(linear_to_srgb(state.finished.textures.diffuse.numpy().clip(0, 1)))
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +100,7 @@ def test_without_the_scene_light_prior_the_tones_collapse(neutral_fits):
 def test_prior_cost_is_flat_over_tone(neutral_fits):
     """Stage 2's terms other than the photometric one do not change with the tone."""
     context = neutral_fits[0.0].context
-    context.config = override(context.config, **{"weights.photometric": 0.0})
+    context = dataclasses.replace(context, config=override(context.config, **{"weights.photometric": 0.0}))
     costs = []
     for ita in (-30.0, 0.0, 20.0, 45.0, 70.0):
         with torch.no_grad():
@@ -112,7 +114,8 @@ def test_params_record_the_tone_and_the_scene_light(neutral_fits, tmp_path):
 
     from deface.export.outputs import write_fit
 
-    folder = write_fit(neutral_fits[50.0], tmp_path / "fit", {"path": "synthetic", "kind": "image", "frames": [0]})
+    record = {"path": "synthetic", "kind": "image", "frames": [0]}
+    folder = write_fit(neutral_fits[50.0].output(), tmp_path / "fit", record)
     params = json.loads((folder / "params.json").read_text())
     assert params["skin_tone"]["free"] and abs(params["skin_tone"]["ita"] - 50.0) < 15
     assert params["illuminant"]["source"] == "grey world"

@@ -23,6 +23,7 @@ from deface.batch.task import Job, Outcome, run_job
 from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
 from deface.io.inputs import InputItem
+from deface.report.html import write_index
 
 PROGRESS_SECONDS = 0.5  # a worker reports its stage at most this often
 WORKER_LOG = "batch-workers.log"  # the workers' stderr: native libraries' messages, crash reports
@@ -94,7 +95,8 @@ def run_batch(items: list[InputItem], output: Path, config: FitConfig, models: P
             display.line(f"interrupted ({stop}) during {during}: {tally.summary()}, {tally.remaining} not done; "
                          "run the same command again to resume (finished inputs are skipped)")
             raise
-    display.line(f"{tally.summary()}; outputs in {output}")
+    write_index(output, [item.name for item in items])
+    display.line(f"{tally.summary()}; outputs in {output} (index.html)")
     return tally.failed
 
 

@@ -18,6 +18,7 @@ SUBCOMMAND_MODULES = (
     "deface.cli.eval",
     "deface.cli.bench",
     "deface.cli.demo",
+    "deface.cli.relight",
 )
 
 for _name in SUBCOMMAND_MODULES:

@@ -23,9 +23,11 @@ from deface.eval.uv_measure import SEEN, both_seen, detail_ratio, speckle, uv_co
 from deface.export.files import save_png
 from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
-from deface.fit.pipeline import FitResult, fit
+from deface.fit.output import FitOutput
+from deface.fit.pipeline import fit
 from deface.io.images import linear_to_srgb, load_image
 from deface.models.ita import texture_ita
+from deface.relight.transfer import transfer_renders
 from deface.texture.confidence import unwrap
 
 
@@ -38,7 +40,7 @@ class PairOutcome:
     uv: dict  # UV-space measures (deface/eval/uv_measure.py): consistency, speckle, texels compared
 
 
-def fit_side(paths: list[Path], config: FitConfig, models_dir, name: str, quiet: bool) -> FitResult:
+def fit_side(paths: list[Path], config: FitConfig, models_dir, name: str, quiet: bool) -> FitOutput:
     frames = [load_image(path) for path in paths]
     log = FitLog(name=name, quiet=quiet)
     return fit(frames, config, models_dir=models_dir, source=name, video=len(frames) > 1, log=log)
@@ -47,20 +49,20 @@ def fit_side(paths: list[Path], config: FitConfig, models_dir, name: str, quiet:
 _IDENTITY = identity.IdentityScorer()  # dlib models load on first use, once per process
 
 
-def score_fit(result: FitResult, textures=None) -> tuple[dict, list[np.ndarray]]:
-    """Mean scores over frames of ``result`` re-rendered with ``textures`` (plus ``"identity"`` when dlib is
-    installed and the photo has a face), and the sRGB outputs."""
-    target = result.context.target
+def score_fit(result: FitOutput, renders: list | None = None) -> tuple[dict, list[np.ndarray]]:
+    """Mean scores over frames of ``renders`` of ``result`` (default: its own render) against its photos (plus
+    ``"identity"`` when dlib is installed and the photo has a face), and the sRGB outputs."""
+    photos = [frame.photo_srgb for frame in result.frames]
     scores, outputs, pasted = [], [], []
-    for frame, rendered in enumerate(result.render(textures)):
+    for frame, rendered in enumerate(renders or result.render()):
         output = linear_to_srgb(_np(rendered.face).clip(0, 1))
-        mask = _np(rendered.coverage * target.face_classifier[frame])
-        scores.append(score_images(output, target.frames_srgb[frame], mask))
-        pasted.append(composite(output, target.frames_srgb[frame], mask))
+        mask = _np(rendered.coverage * result.frames[frame].face_classifier)
+        scores.append(score_images(output, photos[frame], mask))
+        pasted.append(composite(output, photos[frame], mask))
         outputs.append(_np(result.composite(rendered, frame)))
     mean = mean_scores(scores)
     if identity.available():
-        found = identity.identity_scores(_IDENTITY, pasted, target.frames_srgb)
+        found = identity.identity_scores(_IDENTITY, pasted, photos)
         if found is not None:
             mean["identity"] = found
     return mean, outputs
@@ -79,7 +81,7 @@ def evaluate_pair(pair: Pair, config: FitConfig, folder: Path, models_dir=None, 
     target = fit_side(pair.target, config, models_dir, f"{pair.name}/target", quiet)
     seconds = (time.perf_counter() - started) / 2
     source_scores, source_outputs = score_fit(source)
-    swap_scores, swap_outputs = score_fit(target, source.textures)
+    swap_scores, swap_outputs = score_fit(target, transfer_renders(source, target))  # as `deface transfer`
     images = _save_images(folder, source, target, source_outputs[0], swap_outputs[0])
     scores = PairScores(pair.name, source_scores, swap_scores)
     row = ReportRow(pair.name, images, {"source": source_scores, "target": swap_scores})
@@ -87,7 +89,7 @@ def evaluate_pair(pair: Pair, config: FitConfig, folder: Path, models_dir=None, 
                        uv_scores(source, target))
 
 
-def uv_scores(source: FitResult, target: FitResult) -> dict:
+def uv_scores(source: FitOutput, target: FitOutput) -> dict:
     """The two fits' diffuse maps compared in UV space, and their speckle (mean of both fits)."""
     region = both_seen(source.seen, target.seen)
     srgb = [linear_to_srgb(_np(fit.textures.diffuse).clip(0, 1)) for fit in (source, target)]
@@ -97,24 +99,24 @@ def uv_scores(source: FitResult, target: FitResult) -> dict:
             "detail": float(np.mean([d["detail"] for d in details]))}
 
 
-def fit_detail(result: FitResult) -> dict[str, float]:
+def fit_detail(result: FitOutput) -> dict[str, float]:
     """Speckle and detail ratio of a fit's diffuse map against its first frame read in UV, over the texels
     that frame saw (deface/eval/uv_measure.py)."""
     view = result.views[0]
-    region = view.seen(_np(result.render()[0].face_region)) >= SEEN
-    photo, diffuse = unwrap(result.context.target.images[0].numpy(), view), _np(result.textures.diffuse)
+    region = view.seen(_np(result.frames[0].face_region)) >= SEEN
+    photo, diffuse = unwrap(result.frames[0].photo.numpy(), view), _np(result.textures.diffuse)
     return {"speckle": speckle(diffuse, photo, region), "detail": detail_ratio(diffuse, photo, region)}
 
 
-def _albedo_ita(result: FitResult) -> float:
+def _albedo_ita(result: FitOutput) -> float:
     """The skin tone of a fit's diffuse texture (deface/models/ita.py)."""
     return texture_ita(linear_to_srgb(_np(result.textures.diffuse).clip(0, 1)))
 
 
-def _save_images(folder: Path, source: FitResult, target: FitResult, source_out, swap_out) -> dict[str, Path]:
+def _save_images(folder: Path, source: FitOutput, target: FitOutput, source_out, swap_out) -> dict[str, Path]:
     images = {
-        "source": (source.context.target.images[0].numpy(), True),
-        "target": (target.context.target.images[0].numpy(), True),
+        "source": (source.frames[0].photo.numpy(), True),
+        "target": (target.frames[0].photo.numpy(), True),
         "source reconstruction": (source_out, True),
         "target synthesis": (swap_out, True),
         "diffuse (source)": (_np(source.textures.diffuse), True),

@@ -80,7 +80,6 @@ def _fit_photo(task: tuple) -> dict:
 
 def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=None) -> dict:
     """Fit ``path``, write the fit and a neutral-light render into ``result_dir``, return the tone record."""
-    import torch
 
     from deface.export.files import save_png
     from deface.export.outputs import write_fit
@@ -94,19 +93,17 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
     result = fit([load_image(path)], config, models_dir=models_dir, source=str(path), log=FitLog(quiet=True))
     seconds = time.perf_counter() - started
     write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]})
-    neutral = result.relight(white_light(config.lights.bands))[0]
+    neutral = result.render(lights=white_light(config.lights.bands))[0].face
     save_png(result_dir / "neutral.png", neutral.clamp(0, 1).numpy())
-    context, frame = result.context, result.frozen[0]
-    fragments = context.renderer.rasterize(frame.geometry.mesh, frame.geometry.camera)
-    skin = context.target.face_classifier[0].numpy() > 0.5
-    photo = photo_tone(context.target.frames_srgb[0], pixel_uvs(fragments, frame.geometry.mesh),
-                       fragments.mask.numpy() > 0, skin)
+    frame = result.frames[0]
+    fragments = result.renderer.rasterize(frame.geometry.mesh, frame.geometry.camera)
+    skin = frame.face_classifier.numpy() > 0.5
+    photo = photo_tone(frame.photo_srgb, pixel_uvs(fragments, frame.geometry.mesh), fragments.mask.numpy() > 0, skin)
     to_srgb = lambda t: linear_to_srgb(t.detach().clamp(0, 1).numpy())  # noqa: E731
-    illuminant = context.illuminant.record() if context.illuminant is not None else None
     return {"albedo_ita": texture_ita(to_srgb(result.textures.diffuse)),
             "initial_ita": texture_ita(to_srgb(result.initial_textures.diffuse)),
             "photo_ita": photo.ita, "photo_pixels": photo.pixels, "seconds": seconds,
-            "tone": float(torch.as_tensor(context.scene.tone).detach()), "illuminant": illuminant}
+            "tone": result.tone, "illuminant": result.illuminant}
 
 
 def run_tone_benchmark(folder: Path, out_dir: Path, preset: str, baseline: bool, schedule: dict,

@@ -10,7 +10,8 @@ params.json, params.npz                    named parameters and the run record; 
 render.png, render_face.png                I_out and I_R (sRGB); for a clip under frames/<i>/
 lights/<k>.png, masks/light_<k>.png        I_Rs and M_L of each kept light k (k = the light's index)
 masks/face.png                             M_o
-loss_log.csv                               stage, step, loss
+loss_log.csv                               stage, step, loss, then one column per named loss term
+report.html + report/                      the page that shows the fit (deface/report/html.py)
 """
 
 from __future__ import annotations
@@ -25,9 +26,15 @@ import deface
 from deface.export.files import save_png, staged_directory, to_uint8, write_json
 from deface.export.mesh import TEXTURE_FILES, write_glb, write_obj
 from deface.fit.config import to_dict
+from deface.fit.output import FitOutput
+from deface.report.html import write_report
+
+PARAMS_FORMAT = 2
+"""Version of ``params.npz`` (its ``format_version``): 2 holds everything :func:`deface.export.load.load_fit`
+needs to rebuild the fit (1, unversioned, had only the export mesh, textures and masks)."""
 
 
-def write_fit(result, final_folder: Path, record: dict) -> Path:
+def write_fit(result: FitOutput, final_folder: Path, record: dict) -> Path:
     """Write everything for ``result`` atomically into ``final_folder``; ``record`` adds input details."""
     renders = result.render()
     with staged_directory(final_folder) as folder:
@@ -36,10 +43,11 @@ def write_fit(result, final_folder: Path, record: dict) -> Path:
         _write_renders(result, renders, folder)
         _write_params(result, renders, folder, record)
         _write_loss_log(result, folder)
+        write_report(result, folder, final_folder.name)
     return final_folder
 
 
-def _write_textures(result, folder: Path) -> None:
+def _write_textures(result: FitOutput, folder: Path) -> None:
     textures = result.textures
     save_png(folder / TEXTURE_FILES["diffuse"], _np(textures.diffuse), srgb=True)
     save_png(folder / TEXTURE_FILES["specular"], _np(textures.specular), srgb=False)
@@ -48,83 +56,94 @@ def _write_textures(result, folder: Path) -> None:
         save_png(folder / "textures" / "confidence.png", result.confidence[..., None], srgb=False)
 
 
-def _export_vertices(result) -> np.ndarray:
-    context = result.context
-    scene, model = context.scene, context.model
-    expression = scene.expression[0] if scene.num_frames == 1 else torch.zeros_like(scene.expression[0])
-    with torch.no_grad():
-        return model.vertices(scene.identity, expression).numpy()
-
-
-def _write_mesh(result, folder: Path) -> None:
-    model = result.context.model
-    vertices = _export_vertices(result)
+def _write_mesh(result: FitOutput, folder: Path) -> None:
+    model = result.model
+    vertices = result.export_vertices()
     write_obj(folder, vertices, model.triangles, model.uvs, model.triangle_uvs)
     write_glb(folder / "mesh.glb", vertices, model.triangles, model.uvs, model.triangle_uvs,
               to_uint8(_np(result.textures.diffuse), srgb=True),
               to_uint8(_np(result.textures.roughness), srgb=False))
 
 
-def _write_renders(result, renders: list, folder: Path) -> None:
-    kept = result.context.decoupling.kept
+def _write_renders(result: FitOutput, renders: list, folder: Path) -> None:
     for frame, rendered in enumerate(renders):
         base = folder if len(renders) == 1 else folder / "frames" / f"{frame:03d}"
         save_png(base / "render.png", _np(result.composite(rendered, frame)))
         save_png(base / "render_face.png", _np(rendered.face))
         save_png(base / "masks" / "face.png", _np(rendered.face_region), srgb=False)
-        for slot, light in enumerate(kept):
+        for slot, light in enumerate(result.kept):
             save_png(base / "lights" / f"{light}.png", _np(rendered.light_images[slot]))
             save_png(base / "masks" / f"light_{light}.png", _np(rendered.light_masks[slot]), srgb=False)
 
 
-def _write_params(result, renders: list, folder: Path, record: dict) -> None:
-    context = result.context
-    scene, config, target = context.scene, context.config, context.target
-    kept = context.decoupling.kept
-    width, height = target.size
-    lights = scene.lights.detach().numpy()
+def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) -> None:
+    config, model = result.config, result.model
+    kept = list(result.kept)
+    width, height = result.size
+    lights = _np(result.lights)
     params = {
         "format": "deface-params/1",
-        "model": {"name": context.model.name, "expression_names": list(context.model.expression_names),
-                  "expression_prior": context.model.expression_prior},
-        "identity": _np(scene.identity).tolist(),
-        "expression": _np(scene.expression).tolist(),
-        "pose": {"rotation_axis_angle": _np(scene.rotation).tolist(),
-                 "translation_cm": _np(scene.translation).tolist(),
+        "model": {"name": model.name, "expression_names": list(model.expression_names),
+                  "expression_prior": model.expression_prior},
+        "identity": _np(result.identity).tolist(),
+        "expression": _np(result.expression).tolist(),
+        "pose": {"rotation_axis_angle": _np(result.rotation).tolist(),
+                 "translation_cm": _np(result.translation).tolist(),
                  "convention": "model -> camera; camera x right, y down, z forward (OpenCV)"},
-        "camera": {"focal_px": float(scene.focal.detach()), "width": width, "height": height,
-                   "principal_point": [width / 2, height / 2], "working_scale": target.scale},
+        "camera": {"focal_px": float(result.focal), "width": width, "height": height,
+                   "principal_point": [width / 2, height / 2], "working_scale": result.scale},
         "lights": {"bands": config.lights.bands, "kept": kept, "initial_count": int(lights.shape[0]),
                    "sh": {str(k): lights[k].tolist() for k in kept},
                    "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame"},
-        "albedo_coefficients": _np(scene.albedo).tolist(),
-        "skin_tone": {"ita": float(scene.tone.detach()) if config.tone.free_tone else None,
-                      "free": config.tone.free_tone, "convention": "ITA degrees on the albedo model's tone axis"},
-        "illuminant": context.illuminant.record() if context.illuminant is not None else None,
-        "frames": _frames(record.get("frames", [0]), target.kept_frames),
+        "albedo_coefficients": _np(result.albedo).tolist(),
+        "skin_tone": {"ita": result.tone if config.tone.free_tone else None, "free": config.tone.free_tone,
+                      "convention": "ITA degrees on the albedo model's tone axis"},
+        "illuminant": result.illuminant,
+        "frames": _frames(record.get("frames", [0]), result.kept_frames),
         "preset": config.preset,
         "config": to_dict(config),
         "seed": config.seed,
-        "optional_networks": result.optional_networks,
-        "seconds_per_stage": result.log.seconds,
-        "iterations_run": {stage: len(losses) for stage, losses in result.log.losses.items()},
-        "notes": result.log.notes,
+        "optional_networks": result.record.optional_networks,
+        "seconds_per_stage": result.record.seconds,
+        "iterations_run": {stage: len(losses) for stage, losses in result.record.losses.items()},
+        "notes": result.record.notes,
         "versions": {"deface": deface.__version__, "torch": torch.__version__, "numpy": np.__version__,
                      "python": platform.python_version()},
         "input": record,
     }
     write_json(folder / "params.json", params)
-    np.savez_compressed(
-        folder / "params.npz",
-        vertices=_export_vertices(result),
-        diffuse=_np(result.textures.diffuse).astype(np.float16),
-        specular=_np(result.textures.specular).astype(np.float16),
-        roughness=_np(result.textures.roughness).astype(np.float16),
-        light_masks=np.stack([_np(r.light_masks) for r in renders]).astype(np.float16),
-        face_region=np.stack([_np(r.face_region) for r in renders]).astype(np.float16),
-        **({"confidence": result.confidence.astype(np.float16)} if result.confidence is not None else {}),
-        landmarks_2d=np.stack([lm.points for lm in target.landmarks]),
-    )
+    np.savez_compressed(folder / "params.npz", **fit_arrays(result, renders))
+
+
+def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
+    """The arrays of ``params.npz`` (format :data:`PARAMS_FORMAT`): the export mesh, textures and masks, and
+    what re-rendering the fit needs (coefficients, pose, all lights, the frames' shadow transfer and photos)."""
+    frames = result.frames
+    arrays = {
+        "format_version": np.array(PARAMS_FORMAT),
+        "vertices": result.export_vertices(),
+        "diffuse": _np(result.textures.diffuse).astype(np.float16),
+        "specular": _np(result.textures.specular).astype(np.float16),
+        "roughness": _np(result.textures.roughness).astype(np.float16),
+        "light_masks": np.stack([_np(r.light_masks) for r in renders]).astype(np.float32),
+        "face_region": np.stack([_np(r.face_region) for r in renders]).astype(np.float32),
+        "landmarks_2d": np.stack([frame.landmarks for frame in frames]),
+        "identity": _np(result.identity), "expression": _np(result.expression),
+        "rotation": _np(result.rotation), "translation": _np(result.translation), "focal": _np(result.focal),
+        "albedo": _np(result.albedo), "lights": _np(result.lights), "kept": np.asarray(result.kept, dtype=np.int64),
+        "face_classifier": np.stack([_np(frame.face_classifier) for frame in frames]).astype(np.float32),
+        "photos_srgb": np.stack([frame.photo_srgb for frame in frames]).astype(np.float16),
+    }
+    if result.seen is not None:
+        arrays["texture_seen"] = result.seen.astype(np.float16)
+    if result.confidence is not None:
+        arrays["confidence"] = result.confidence.astype(np.float16)
+    if frames[0].transfer is not None:
+        arrays["transfer_occluded"] = np.stack([_np(frame.transfer.occluded) for frame in frames])
+        arrays["transfer_visibility"] = np.stack([_np(frame.transfer.visibility) for frame in frames])
+        arrays["transfer_vertices"] = np.stack([_np(frame.transfer.vertices) for frame in frames])
+        arrays["transfer_rays"] = np.array(frames[0].transfer.rays)
+    return arrays
 
 
 def _frames(indices: list[int], kept: list[int] | None) -> list[int]:
@@ -132,11 +151,22 @@ def _frames(indices: list[int], kept: list[int] | None) -> list[int]:
     return indices if kept is None else [indices[i] for i in kept]
 
 
-def _write_loss_log(result, folder: Path) -> None:
-    lines = ["stage,step,loss"]
-    for stage, losses in result.log.losses.items():
-        lines += [f"{stage},{step},{loss:.6g}" for step, loss in enumerate(losses)]
-    (folder / "loss_log.csv").write_text("\n".join(lines) + "\n")
+def _write_loss_log(result: FitOutput, folder: Path) -> None:
+    """``loss_log.csv``: stage, step, total loss, then one column per named term (empty where a stage has
+    no such term)."""
+    (folder / "loss_log.csv").write_text(loss_log_csv(result.record))
+
+
+def loss_log_csv(record) -> str:
+    names = sorted({name for steps in record.terms.values() for terms in steps for name in terms})
+    lines = [",".join(["stage", "step", "loss", *names])]
+    for stage, losses in record.losses.items():
+        steps = record.terms.get(stage, [])
+        for step, loss in enumerate(losses):
+            terms = steps[step] if step < len(steps) else {}
+            values = [f"{terms[name]:.6g}" if name in terms else "" for name in names]
+            lines.append(",".join([stage, str(step), f"{loss:.6g}", *values]))
+    return "\n".join(lines) + "\n"
 
 
 def _np(tensor: torch.Tensor) -> np.ndarray:

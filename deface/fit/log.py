@@ -18,6 +18,7 @@ class FitLog:
     every: int = 50
     quiet: bool = False
     losses: dict[str, list[float]] = field(default_factory=dict)
+    terms: dict[str, list[dict[str, float]]] = field(default_factory=dict)  # stage -> per step named terms
     seconds: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     _started: dict[str, float] = field(default_factory=dict)
@@ -31,12 +32,21 @@ class FitLog:
         self.info(f"{stage} done in {elapsed:.1f} s")
         return elapsed
 
-    def step(self, stage: str, step: int, total: int, loss: float) -> None:
+    def step(self, stage: str, step: int, total: int, loss: float, terms: dict[str, float] | None = None) -> None:
+        """Record a step's loss (and its named terms); print it with the largest terms every ``every`` steps."""
         self.losses.setdefault(stage, []).append(loss)
+        self.terms.setdefault(stage, []).append(dict(terms or {}))
         if not self.quiet and (step % self.every == 0 or step == total - 1):
-            console.print(f"[dim]{self.name}[/dim] {stage} {step + 1:>4}/{total} loss {loss:.5g}")
+            console.print(f"[dim]{self.name}[/dim] {stage} {step + 1:>4}/{total} loss {loss:.5g}"
+                          f"{largest_terms(terms or {})}")
 
     def info(self, message: str) -> None:
         self.notes.append(message)
         if not self.quiet:
             console.print(f"[dim]{self.name}[/dim] {message}")
+
+
+def largest_terms(terms: dict[str, float], count: int = 3) -> str:
+    """`` (photometric 0.41, landmarks 0.12, ...)``: the ``count`` largest terms by magnitude, or ""."""
+    shown = sorted(terms.items(), key=lambda item: -abs(item[1]))[:count]
+    return " (" + ", ".join(f"{name} {value:.3g}" for name, value in shown) + ")" if shown else ""

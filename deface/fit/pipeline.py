@@ -1,5 +1,11 @@
-"""The whole fit for one input (an image, or the frames of a clip): landmarks -> stage 1 -> face region h
--> stage 2 -> stage 3, returning everything the exporters and the evaluation need.
+"""The whole fit for one input (an image, or the frames of a clip), as a list of stage runners:
+
+    landmarks (detect) -> prepare (stage 1, face region h, scene light) -> stage 2 -> stage 3 -> FitOutput
+
+Each runner takes the state so far and returns its result (deface/fit/state.py, docs/design.md);
+:func:`run_stages` keeps them all (:class:`FitState`, for tests and tools that look inside), :func:`fit` and
+:func:`fit_target` return the frozen :class:`~deface.fit.output.FitOutput` that export, eval, relight and the
+report consume.
 """
 
 from __future__ import annotations
@@ -13,11 +19,13 @@ import torch
 from deface.fit.config import FitConfig, override
 from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
-from deface.fit.scene import SceneParameters, initial_lights, topology_tensors
+from deface.fit.output import FinishedTextures, FitOutput, RunRecord
+from deface.fit.scene import SceneParameters, initial_lights
 from deface.fit.scene_light import start_from_scene
 from deface.fit.stage1 import fit_landmarks
-from deface.fit.stage2 import FrameRender, StageContext, run_stage2
-from deface.fit.stage3 import FrozenFrame, relight_frozen, render_frozen, run_stage3
+from deface.fit.stage2 import Stage2Result, run_stage2
+from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
+from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
 from deface.fit.target import FitTarget, scale_landmarks, working_frames
 from deface.fit.texels import complete_textures, seen_texels, texture_confidence
 from deface.landmarks.correspondence import correspondence_for
@@ -26,38 +34,22 @@ from deface.models.registry import load_face_model
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
 from deface.priors.illuminant import estimate_illuminant
-from deface.render.mesh import Textures
 
 
-@dataclass
-class FitResult:
-    """A finished fit: textures, kept lights, per-frame geometry and renders, and the run record."""
+@dataclass(frozen=True)
+class FitState:
+    """Every stage's result of one fit. Users and the exporters take :meth:`output`; the context is here for
+    tests and benchmarks that look inside a stage."""
 
-    context: StageContext
-    frozen: list[FrozenFrame]
-    textures: Textures  # final UV maps (stage 3)
-    initial_textures: Textures  # T^0 from the albedo model
-    log: FitLog
-    optional_networks: dict  # name -> "used" or the reason it was not
-    confidence: np.ndarray | None = None  # [Ht, Wt] how well the frames constrain each texel (deface/fit/texels.py)
-    seen: np.ndarray | None = None  # [Ht, Wt] visible x h x facing, best frame (what completion went by)
-    views: list | None = None  # per frame TexelView: where each texel lands and how it is seen
+    context: StageContext  # inputs, posed face, trained scene and decoupling
+    stage2: Stage2Result
+    stage3: Stage3Result
+    finished: FinishedTextures  # stage 3's maps completed, and what the frames tell about each texel
+    optional_networks: dict[str, str]  # name -> "used" or the reason it was not
 
-    def render(self, textures: Textures | None = None) -> list[FrameRender]:
-        """Per-frame renders with the fit's geometry, lights and M_o, using ``textures`` (default: own)."""
-        textures = textures or self.textures
-        with torch.no_grad():
-            return [render_frozen(self.context, frame, textures)[0] for frame in self.frozen]
-
-    def relight(self, lights: torch.Tensor, textures: Textures | None = None) -> list[torch.Tensor]:
-        """Per-frame faces [H, W, 3] (linear, 0 off the face) under ``lights`` [K, B*B, 3], summed."""
-        with torch.no_grad():
-            return [relight_frozen(self.context, frame, textures or self.textures, lights) for frame in self.frozen]
-
-    def composite(self, rendered: FrameRender, frame: int) -> torch.Tensor:
-        """I_out [H, W, 3] linear: the face where M_o says so, the input elsewhere."""
-        weight = rendered.face_region[..., None]
-        return rendered.face * weight + self.context.target.images[frame] * (1 - weight)
+    def output(self) -> FitOutput:
+        record = RunRecord.from_log(self.context.log, self.optional_networks)
+        return FitOutput.from_stages(self.context, self.stage3, self.finished, record)
 
 
 def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool):
@@ -73,7 +65,7 @@ def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool
 
 
 def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source: str = "input",
-        video: bool = False, log: FitLog | None = None) -> FitResult:
+        video: bool = False, log: FitLog | None = None) -> FitOutput:
     """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``."""
     log = log or FitLog(name=source)
     log.start("landmarks")
@@ -87,10 +79,15 @@ def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source:
     return fit_target(target, config, models_dir=models_dir, log=log)
 
 
-def fit_target(target: FitTarget, config: FitConfig, *, models_dir=None, log: FitLog | None = None) -> FitResult:
+def fit_target(target: FitTarget, config: FitConfig, *, models_dir=None, log: FitLog | None = None) -> FitOutput:
     """Stages 1-3 on frames whose landmarks are known (``fit`` detects them; tests give them)."""
+    return run_stages(target, config, models_dir=models_dir, log=log).output()
+
+
+def run_stages(target: FitTarget, config: FitConfig, *, models_dir=None, log: FitLog | None = None) -> FitState:
+    """:func:`fit_target` keeping every stage's result."""
     with torch_threads(config.threads):
-        return _fit_target(target, config, models_dir, log)
+        return _run_stages(target, config, models_dir, log or FitLog())
 
 
 @contextmanager
@@ -105,51 +102,52 @@ def torch_threads(count: int):
         torch.set_num_threads(previous)
 
 
-def _fit_target(target: FitTarget, config: FitConfig, models_dir, log: FitLog | None) -> FitResult:
+def _run_stages(target: FitTarget, config: FitConfig, models_dir, log: FitLog) -> FitState:
     torch.manual_seed(config.seed)
     np.random.seed(config.seed)
-    log = log or FitLog()
-    model = load_face_model(config.model, models_dir)
-    config = _supported_tone(model, config, log)
-    context = _stage1(model, target, config, log, models_dir)
-    optional = _face_classifier(context, config, models_dir, log)
-    if config.tone.scene_light_prior:
-        context.illuminant = _scene_illuminant(context, config)
-        log.info(f"scene illuminant: {context.illuminant.source}, white level "
-                 f"{np.round(context.illuminant.white, 3).tolist()}, {context.illuminant.cct:.0f} K")
-        start_from_scene(context)
+    context, optional = prepare(target, config, models_dir=models_dir, log=log)
     log.start("stage 2")
-    run_stage2(context)
+    stage2 = run_stage2(context)
     log.stop("stage 2")
-    human_prior, reason = load_human_prior(models_dir) if config.priors.human_prior else (None, "off in config")
+    human_prior, reason = (load_human_prior(models_dir) if context.config.priors.human_prior
+                           else (None, "off in config"))
     optional["facenet"] = "used" if human_prior is not None else reason
-    if human_prior is None and config.priors.human_prior:
+    if human_prior is None and context.config.priors.human_prior:
         log.info(f"human prior (FaceNet) not used: {reason}")
     log.start("stage 3")
     stage3 = run_stage3(context, human_prior)
     log.stop("stage 3")
-    result = FitResult(context, stage3.frozen, stage3.textures, stage3.initial, log, optional, views=stage3.views)
-    return _finish_textures(result, config, log)
-
-
-def _finish_textures(result: FitResult, config: FitConfig, log: FitLog) -> FitResult:
-    """Complete the texels no frame showed, and measure how well the frames constrain each texel."""
     log.start("textures")
-    result.seen = seen_texels(result.views, [rendered.face_region for rendered in result.render()])
-    if config.completion.enabled:
-        result.textures = complete_textures(result.context.model, result.textures, result.initial_textures,
-                                            result.seen, config.completion)
-    result.confidence = texture_confidence(result.views, result.render())
+    finished = finish_textures(context, stage3)
     log.stop("textures")
-    return result
+    return FitState(context, stage2, stage3, finished, optional)
 
 
-def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog, models_dir=None) -> StageContext:
+@torch.no_grad()
+def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedTextures:
+    """Complete the texels no frame showed, and measure how well the frames constrain each texel."""
+    renders = [render_frozen(context, frame, stage3.textures)[0] for frame in stage3.frozen]
+    seen = seen_texels(stage3.views, [rendered.face_region for rendered in renders])
+    textures = stage3.textures
+    if context.config.completion.enabled:
+        textures = complete_textures(context.model, textures, stage3.initial, seen, context.config.completion)
+        renders = [render_frozen(context, frame, textures)[0] for frame in stage3.frozen]
+    return FinishedTextures(textures, seen, texture_confidence(stage3.views, renders))
+
+
+def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
+            log: FitLog | None = None) -> tuple[StageContext, dict[str, str]]:
+    """Stage 1 and what stages 2-3 fit to besides the photos (h, the scene's light): the context stage 2
+    starts from, and which optional networks were used. Seed torch/numpy first for a reproducible fit."""
+    log = log or FitLog(quiet=True)
+    model = load_face_model(config.model, models_dir)
+    config = _supported_tone(model, config, log)
     log.start("stage 1")
     corr = correspondence_for(model, models_dir=models_dir)
     result = fit_landmarks(model, corr, target.landmarks, target.size, config.stage1, config.iterations.stage1)
     log.stop("stage 1")
-    target.attach_landmarks(corr, result)
+    landmarks = LandmarkTarget(corr, torch.as_tensor(result.landmarks_2d, dtype=torch.float32),
+                               torch.as_tensor(corr.weights, dtype=torch.float32))
     scene = SceneParameters(
         identity=torch.as_tensor(result.identity), expression=torch.as_tensor(result.expression),
         rotation=torch.as_tensor(result.rotation), translation=torch.as_tensor(result.translation),
@@ -157,7 +155,16 @@ def _stage1(model, target: FitTarget, config: FitConfig, log: FitLog, models_dir
         lights=initial_lights(config.lights), tone=_initial_tone(model, config),
     )
     decoupling = Decoupling(config.decouple, config.lights.num_lights, target.num_frames, target.size)
-    return StageContext(model, target, scene, decoupling, config, topology_tensors(model), log)
+    face = PosedFace.create(model, scene, config, target.size)
+    classifier, note = _face_classifier(face, target, config, models_dir, log)
+    scene_light = None
+    if config.tone.scene_light_prior:
+        illuminant = _scene_illuminant(face, target, config)
+        log.info(f"scene illuminant: {illuminant.source}, white level "
+                 f"{np.round(illuminant.white, 3).tolist()}, {illuminant.cct:.0f} K")
+        scene_light = start_from_scene(face, target.frames_srgb, classifier, illuminant, config, log)
+    inputs = FitInputs(target, landmarks, classifier, scene_light)
+    return StageContext.create(inputs, face, decoupling, config, log), {"face_parsing": note}
 
 
 def _supported_tone(model, config: FitConfig, log: FitLog) -> FitConfig:
@@ -174,27 +181,24 @@ def _initial_tone(model, config: FitConfig) -> float:
 
 
 @torch.no_grad()
-def _face_classifier(context: StageContext, config: FitConfig, models_dir, log: FitLog) -> dict:
-    """h per frame from the stage-1 face; returns which optional parser was used (for the run record)."""
+def _face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, models_dir,
+                     log: FitLog) -> tuple[tuple[torch.Tensor, ...], str]:
+    """h per frame from the stage-1 face, and which parser made it (for the run record)."""
     classifier, note = _classifier(config.decouple.face_region_source, models_dir)
     log.info(f"face region h: {note}")
-    target = context.target
+    found = []
     for frame in range(target.num_frames):
-        geometry = context.geometry(frame)
-        coverage = context.renderer.rasterize(geometry.mesh, geometry.camera).mask
-        h = classifier(target.frames_srgb[frame], coverage.numpy(), target.landmarks[frame].points)
-        target.face_classifier[frame] = torch.as_tensor(np.asarray(h), dtype=torch.float32)
-    return {"face_parsing": note}
+        _, fragments = face.fragments(frame)
+        h = classifier(target.frames_srgb[frame], fragments.mask.numpy(), target.landmarks[frame].points)
+        found.append(torch.as_tensor(np.asarray(h), dtype=torch.float32))
+    return tuple(found), note
 
 
 @torch.no_grad()
-def _scene_illuminant(context: StageContext, config: FitConfig):
+def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig):
     """The illuminant estimate from every frame's pixels outside the stage-1 face."""
-    faces = []
-    for frame in range(context.target.num_frames):
-        geometry = context.geometry(frame)
-        faces.append(context.renderer.rasterize(geometry.mesh, geometry.camera).mask.numpy() > 0)
-    return estimate_illuminant(context.target.frames_srgb, faces, config.tone.illuminant)
+    faces = [face.fragments(frame)[1].mask.numpy() > 0 for frame in range(target.num_frames)]
+    return estimate_illuminant(target.frames_srgb, faces, config.tone.illuminant)
 
 
 def _classifier(source: str, models_dir):

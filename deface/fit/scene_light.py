@@ -10,7 +10,7 @@ step. So the fit starts where the scene says it is:
   bright as their 90th percentile, :mod:`deface.models.ita`, without the brightest tenth, where the
   specular highlight is - a larger share of a dark skin's light, so leaving it in would lighten dark skins)
   divided by W and by ``LIT_SKIN_SHADING``. Stage 2 then refines both;
-- the skin pixels of the cheeks and forehead are kept (``context.tone_regions``) for the scene-light prior's
+- the skin pixels of the cheeks and forehead are kept (``SceneLight.regions``) for the scene-light prior's
   level term.
 """
 
@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from deface.fit.state import SceneLight
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import KEY_QUANTILE, front_directions, peak_white
 from deface.models.ita import CLIPPED, in_tone_boxes, ita_of_srgb, lit_skin, pixel_uvs
@@ -38,21 +39,21 @@ def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Ten
 
 
 @torch.no_grad()
-def tone_regions(context) -> list[np.ndarray]:
-    """Per frame [H, W] bool: pixels showing the cheeks and forehead that h calls skin."""
+def tone_regions(face, classifier) -> list[np.ndarray]:
+    """Per frame [H, W] bool: pixels of ``face`` (a :class:`~deface.fit.state.PosedFace`) showing the cheeks
+    and forehead that h (``classifier``, T x [H, W]) calls skin."""
     regions = []
-    for frame in range(context.target.num_frames):
-        geometry = context.geometry(frame)
-        fragments = context.renderer.rasterize(geometry.mesh, geometry.camera)
-        skin = context.target.face_classifier[frame].numpy() > 0.5
+    for frame, h in enumerate(classifier):
+        geometry, fragments = face.fragments(frame)
+        skin = h.numpy() > 0.5
         region = (fragments.mask.numpy() > 0) & skin & in_tone_boxes(pixel_uvs(fragments, geometry.mesh))
         regions.append(region)
     return regions
 
 
-def photo_skin_ita(context, regions: list[np.ndarray], white: np.ndarray) -> float | None:
+def photo_skin_ita(frames_srgb: list[np.ndarray], regions: list[np.ndarray], white: np.ndarray) -> float | None:
     """The ITA of the photo's most lit skin as albedo under white level ``white`` (None: too little skin)."""
-    srgb = np.concatenate([context.target.frames_srgb[f][r] for f, r in enumerate(regions)])
+    srgb = np.concatenate([frames_srgb[f][r] for f, r in enumerate(regions)])
     srgb = srgb[srgb.max(-1) < CLIPPED]
     if len(srgb) < 12:
         return None
@@ -62,20 +63,20 @@ def photo_skin_ita(context, regions: list[np.ndarray], white: np.ndarray) -> flo
     return ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
 
 
-def start_from_scene(context) -> None:
-    """Scale the initial lights to the scene's white level and start the tone at the photo's (in place)."""
-    white = context.illuminant.white
+def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant, config, log) -> SceneLight:
+    """Scale ``face.scene``'s initial lights to the scene's white level and start the tone at the photo's (in
+    place); returns the scene light the scene-light terms hold the fit to."""
+    white, scene = illuminant.white, face.scene
     with torch.no_grad():
-        context.scene.lights.copy_(lights_scaled_to_white(context.scene.lights, white))
-    regions = tone_regions(context)
-    if sum(int(r.sum()) for r in regions) >= 12:
-        context.tone_regions = [torch.as_tensor(r) for r in regions]
-    if not context.config.tone.free_tone:
-        return
-    ita = photo_skin_ita(context, regions, white)
-    if ita is not None:
-        with torch.no_grad():
-            context.scene.tone.fill_(ita)
-        context.model.albedo.tone.clamp_(context.scene.tone, context.config.tone.ita_range)
-        context.log.info(f"skin tone starts at ITA {float(context.scene.tone.detach()):.1f} (the photo's lit "
-                         "skin under the scene's light)")
+        scene.lights.copy_(lights_scaled_to_white(scene.lights, white))
+    regions = tone_regions(face, classifier)
+    kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= 12 else None
+    if config.tone.free_tone:
+        ita = photo_skin_ita(frames_srgb, regions, white)
+        if ita is not None:
+            with torch.no_grad():
+                scene.tone.fill_(ita)
+            face.model.albedo.tone.clamp_(scene.tone, config.tone.ita_range)
+            log.info(f"skin tone starts at ITA {float(scene.tone.detach()):.1f} (the photo's lit "
+                     "skin under the scene's light)")
+    return SceneLight(illuminant, kept)

@@ -12,125 +12,35 @@ from dataclasses import dataclass
 import torch
 
 from deface.decouple.ace import light_areas
-from deface.fit.config import FitConfig
 from deface.fit.convergence import converged
-from deface.fit.decoupling import Decoupling
 from deface.fit.guard import StepGuard
-from deface.fit.scene import SceneParameters, frame_geometry
-from deface.fit.target import FitTarget
-from deface.io.images import LUMINANCE
+from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.losses import decouple as decouple_losses
-from deface.losses.illuminant import (
-    exposure_term,
-    front_directions,
-    key_light_level,
-    light_colour_term,
-)
-from deface.losses.photometric import photometric_loss
-from deface.priors.illuminant import IlluminantEstimate
-from deface.render.mesh import Textures
-from deface.render.renderer import Renderer, ShadowTransferCache
 
 
-@dataclass
-class FrameRender:
-    """One frame's stage-2 products: per-light renders, buffers, masks and the composed face."""
+@dataclass(frozen=True)
+class Stage2Result:
+    """What stage 2 did; its parameters are the context's scene and decoupling (trained in place)."""
 
-    light_images: torch.Tensor  # [K, H, W, 3] I_Rs (kept lights)
-    coverage: torch.Tensor  # [H, W] M_R
-    light_masks: torch.Tensor  # [K, H, W] M_L
-    face_region: torch.Tensor  # [H, W] M_o
-    face: torch.Tensor  # [H, W, 3] I_R
-    region_probability: torch.Tensor | None = None  # [H, W] g (None without the field g)
-    normals: torch.Tensor | None = None  # [H, W, 3] unit normals of the render (model frame)
+    history: list[float]  # total loss per iteration
+    terms: list[dict[str, float]]  # the named terms per iteration (they sum to the total)
+    kept: list[int]  # the lights ACE kept
 
 
-class StageContext:
-    """What stages 2 and 3 share: model, target, scene, decoupling, renderer, shadow cache, logger."""
-
-    def __init__(self, model, target: FitTarget, scene: SceneParameters, decoupling: Decoupling,
-                 config: FitConfig, topology: dict, log):
-        self.model, self.target, self.scene, self.decoupling = model, target, scene, decoupling
-        self.config, self.topology, self.log = config, topology, log
-        self.renderer = Renderer(target.render_config(config))
-        self.shadow_caches = [ShadowTransferCache(self.renderer) for _ in range(target.num_frames)]
-        self.illuminant: IlluminantEstimate | None = None  # the scene's light, set after stage 1
-        self.tone_regions: list[torch.Tensor] = []  # per frame [H, W] bool: skin of the cheeks and forehead
-        self._directions = front_directions()
-
-    def geometry(self, frame: int):
-        return frame_geometry(self.model, self.scene, self.topology, frame, self.target.size)
-
-    def albedo_textures(self, size: int | None = None) -> Textures:
-        """The albedo model's maps at the fitted coefficients (and tone, when the tone is free), ``size``
-        texels square (default: ``config.stage2_texture_size``)."""
-        size = size or self.config.stage2_texture_size
-        ita = self.scene.tone if self.config.tone.free_tone else None
-        diffuse, specular = self.model.albedo.textures(self.scene.albedo, size, ita)
-        roughness = torch.full((*diffuse.shape[:2], 1), self.model.albedo.roughness_default)
-        return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
-
-    def scene_light_prior(self) -> torch.Tensor:
-        """The scene-light colour term for the kept lights (0 when off or without an estimate)."""
-        tone = self.config.tone
-        if not tone.scene_light_prior or self.illuminant is None:
-            return torch.zeros(())
-        white = torch.as_tensor(self.illuminant.white, dtype=torch.float32)
-        colour = light_colour_term(self.scene.lights[self.decoupling.kept], white, self._directions)
-        return tone.weight * colour / tone.colour_sigma**2
-
-    def key_light_exposure(self, frame: int, rendered: FrameRender) -> torch.Tensor:
-        """The scene-light level term of one frame: the brightest light's level on the cheeks and forehead
-        (0 when off)."""
-        tone, region = self.config.tone, self.tone_regions[frame] if self.tone_regions else None
-        if not tone.scene_light_prior or self.illuminant is None or region is None or rendered.normals is None:
-            return torch.zeros(())
-        level = key_light_level(self.scene.lights[self.decoupling.kept], rendered.normals, region)
-        target = float(self.illuminant.white @ LUMINANCE)
-        return tone.weight * exposure_term(level, target) / tone.exposure_sigma**2
-
-    def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool, geometry=None) -> FrameRender:
-        geometry = geometry or self.geometry(frame)
-        fragments = self.renderer.rasterize(geometry.mesh, geometry.camera)
-        transfer = self._transfer(frame, geometry.mesh, refresh_shadows)
-        kept = self.decoupling.kept
-        output = self.renderer.shade(geometry.mesh, geometry.camera, fragments, textures,
-                                     self.scene.lights[kept], transfer)
-        return self.compose(frame, output.images, output.mask, output.normals)
-
-    def compose(self, frame: int, light_images: torch.Tensor, coverage: torch.Tensor,
-                normals: torch.Tensor | None = None) -> FrameRender:
-        light_masks = self.decoupling.light_masks(frame, coverage)
-        probability = self.decoupling.region_probability(frame, coverage)
-        face_region = self.decoupling.face_region(frame, coverage, self.target.face_classifier[frame], probability)
-        face = (light_images * light_masks[..., None]).sum(0)
-        return FrameRender(light_images, coverage, light_masks, face_region, face, probability, normals)
-
-    def _transfer(self, frame: int, mesh, refresh: bool):
-        if not self.config.render.shadows:
-            return None
-        cache = self.shadow_caches[frame]
-        return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
-
-    def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
-        return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
-                                rendered.coverage, blur=self.config.render.render_blur,
-                                form=self.config.decouple.loss_form)
-
-
-def run_stage2(context: StageContext) -> list[float]:
-    """Run stage 2 in place on ``context.scene`` / ``context.decoupling``; returns the loss per iteration."""
+def run_stage2(context: StageContext) -> Stage2Result:
+    """Run stage 2 in place on ``context.scene`` / ``context.decoupling``."""
     config, scene, decoupling = context.config, context.scene, context.decoupling
     optimiser = torch.optim.Adam(_parameter_groups(context))
     guard = StepGuard(optimiser, "stage 2", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
-    history = []
+    history, term_history = [], []
     ace_at = min(config.decouple.ace_iteration, config.iterations.stage2 - 1)
     for step in range(config.iterations.stage2):
         if step == ace_at and decoupling.light_field is not None:
             _apply_ace(context)
         optimiser.zero_grad(set_to_none=True)
         refresh = step % config.render.shadow_refresh_every == 0
-        loss = _stage2_loss(context, before_ace=step < ace_at, refresh_shadows=refresh)
+        terms = LossTerms()
+        loss = _stage2_loss(context, before_ace=step < ace_at, refresh_shadows=refresh, terms=terms)
         loss.backward()
         optimiser.step()
         scene.clamp_(context.model.expression_prior)
@@ -139,14 +49,15 @@ def run_stage2(context: StageContext) -> list[float]:
         guard.check(loss)
         value = float(loss.detach())
         history.append(value)
-        context.log.step("stage 2", step, config.iterations.stage2, value)
+        term_history.append(terms.values)
+        context.log.step("stage 2", step, config.iterations.stage2, value, terms.values)
         iterations = config.iterations
         if step + 1 < iterations.stage2 and converged(history, iterations.convergence_window,
                                                       iterations.stage2_tolerance, start=ace_at + 1):
             context.log.info(f"stage 2 converged after {step + 1} of {iterations.stage2} steps "
                              f"(tolerance {iterations.stage2_tolerance} per {iterations.convergence_window} steps)")
             break
-    return history
+    return Stage2Result(history, term_history, decoupling.kept)
 
 
 def _parameter_groups(context: StageContext) -> list[dict]:
@@ -167,38 +78,47 @@ def _parameter_groups(context: StageContext) -> list[dict]:
     return groups
 
 
-def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool) -> torch.Tensor:
-    weights, scene = context.config.weights, context.scene
+def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool,
+                 terms: LossTerms | None = None) -> torch.Tensor:
+    """The stage-2 total; ``terms`` collects it by name (frame terms as their mean over frames)."""
+    weights, scene, frames = context.config.weights, context.scene, context.target.num_frames
+    terms = terms or LossTerms()
+    per_frame = 1.0 / frames
     textures = context.albedo_textures()
     total = torch.zeros(())
-    for frame in range(context.target.num_frames):
+    for frame in range(frames):
         geometry = context.geometry(frame)  # once per step: shared by the render and L_lan
         rendered = context.render_frame(frame, textures, refresh_shadows, geometry=geometry)
-        total = total + weights.photometric * context.photometric(frame, rendered)
-        total = total + weights.landmarks * context.target.landmark_loss(geometry, frame)
-        total = total + _decoupling_terms(context, frame, rendered, before_ace)
-        total = total + context.key_light_exposure(frame, rendered)
-    total = total / context.target.num_frames
-    total = total + weights.sh_regulariser * scene.lights[context.decoupling.kept].pow(2).mean()
-    total = total + weights.albedo_prior * scene.albedo.pow(2).mean()
-    total = total + weights.identity_prior * scene.identity.pow(2).mean()
-    total = total + weights.expression_prior * scene.expression.pow(2).mean()
-    return total + context.scene_light_prior()
+        total = total + terms.add("photometric", weights.photometric * context.photometric(frame, rendered),
+                                  per_frame)
+        total = total + terms.add("landmarks", weights.landmarks * context.inputs.landmarks.loss(geometry, frame),
+                                  per_frame)
+        total = total + _decoupling_terms(context, frame, rendered, before_ace, terms, per_frame)
+        total = total + terms.add("scene_light_level", context.key_light_exposure(frame, rendered), per_frame)
+    total = total / frames
+    total = total + terms.add("sh_regulariser",
+                              weights.sh_regulariser * scene.lights[context.decoupling.kept].pow(2).mean())
+    total = total + terms.add("albedo_prior", weights.albedo_prior * scene.albedo.pow(2).mean())
+    total = total + terms.add("identity_prior", weights.identity_prior * scene.identity.pow(2).mean())
+    total = total + terms.add("expression_prior", weights.expression_prior * scene.expression.pow(2).mean())
+    return total + terms.add("scene_light_colour", context.scene_light_prior())
 
 
-def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool) -> torch.Tensor:
+def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool,
+                      terms: LossTerms, scale: float) -> torch.Tensor:
     weights, form = context.config.weights, context.config.decouple.loss_form
     decoupling, total = context.decoupling, torch.zeros(())
-    if rendered.region_probability is not None and context.target.face_classifier[frame] is not None:
-        total = total + weights.segmentation * decouple_losses.segmentation_loss(
-            rendered.region_probability, context.target.face_classifier[frame], rendered.coverage, form=form)
+    classifier = context.inputs.face_classifier[frame]
+    if rendered.region_probability is not None:
+        total = total + terms.add("segmentation", weights.segmentation * decouple_losses.segmentation_loss(
+            rendered.region_probability, classifier, rendered.coverage, form=form), scale)
     if decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         if before_ace:
-            total = total + weights.area * decouple_losses.area_loss(rendered.light_masks, rendered.coverage,
-                                                                     form=form)
+            total = total + terms.add("area", weights.area * decouple_losses.area_loss(
+                rendered.light_masks, rendered.coverage, form=form), scale)
         else:
-            total = total + weights.binary * decouple_losses.binary_loss(rendered.light_masks,
-                                                                         rendered.coverage, form=form)
+            total = total + terms.add("binary", weights.binary * decouple_losses.binary_loss(
+                rendered.light_masks, rendered.coverage, form=form), scale)
     return total
 
 

@@ -16,29 +16,41 @@ import torch
 from deface.fit import fast_stage3
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
-from deface.fit.stage2 import FrameRender, StageContext
+from deface.fit.scene import FrameGeometry
+from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.fit.texels import frame_views
 from deface.losses import decouple as decouple_losses
 from deface.losses.texture import texture_regularisers
 from deface.priors.global_prior import global_prior, kmeans_palette
 from deface.priors.local_prior import local_prior
-from deface.render.mesh import Textures
-from deface.render.supersample import box_filter, supersampled_camera
+from deface.render.camera import Camera
+from deface.render.mesh import Mesh, Textures
+from deface.render.renderer import Fragments, RenderOutput, ShadowTransfer
+from deface.render.supersample import shade_supersampled, supersampled_camera
 from deface.texture.confidence import TexelView
 from deface.texture.pyramid import TexturePyramid, level_gates, level_sizes
 
 
-@dataclass
+@dataclass(frozen=True)
+class AlbedoReference:
+    """Screen-space renders of T^0's maps (LP's reference), working resolution."""
+
+    diffuse: torch.Tensor  # [H, W, 3]
+    specular: torch.Tensor  # [H, W, 3]
+    roughness: torch.Tensor  # [H, W, 1]
+
+
+@dataclass(frozen=True)
 class FrozenFrame:
     """A frame's stage-3 constants: geometry, ray-cast fragments, shadow transfer, M_o, reference albedo."""
 
     index: int  # frame number
-    geometry: object  # posed mesh and the working-resolution camera
-    camera: object  # the camera the fragments were cast with (config.render.supersampling x finer)
-    fragments: object
-    transfer: object
+    geometry: FrameGeometry  # detached posed mesh and the working-resolution camera
+    camera: Camera  # the camera the fragments were cast with (config.render.supersampling x finer)
+    fragments: Fragments  # ray-cast at ``camera``
+    transfer: ShadowTransfer | None  # the frame's shadow transfer (None without shadows)
     face_region: torch.Tensor  # [H, W] M_o from stage 2
-    reference: dict  # screen-space albedo renders of T^0: diffuse [H,W,3], specular [H,W,3], roughness [H,W,1]
+    reference: AlbedoReference
 
 
 class TextureParameters(torch.nn.Module):
@@ -74,6 +86,7 @@ class Stage3Result:
     initial: Textures  # T^0
     frozen: list[FrozenFrame]  # per-frame constants, reused to re-render with any textures
     history: list[float]  # loss per iteration
+    terms: list[dict[str, float]]  # the named terms per iteration (they sum to the total)
     views: list[TexelView]  # per frame: how the frozen camera sees each texel
 
 
@@ -86,23 +99,25 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
     guard = StepGuard(optimiser, "stage 3", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
     loss_of = objective(context, frozen, initial, human_prior)
-    history, iterations = [], context.config.iterations
+    history, term_history, iterations = [], [], context.config.iterations
     for step in range(iterations.stage3):
         optimiser.zero_grad(set_to_none=True)
-        loss = loss_of(parameters.textures())
+        terms = LossTerms()
+        loss = loss_of(parameters.textures(), terms)
         loss.backward()
         optimiser.step()
         guard.check(loss)
         value = float(loss.detach())
         history.append(value)
-        context.log.step("stage 3", step, iterations.stage3, value)
+        term_history.append(terms.values)
+        context.log.step("stage 3", step, iterations.stage3, value, terms.values)
         if step + 1 < iterations.stage3 and converged(history, iterations.convergence_window,
                                                       iterations.stage3_tolerance):
             context.log.info(f"stage 3 converged after {step + 1} of {iterations.stage3} steps "
                              f"(tolerance {iterations.stage3_tolerance} per {iterations.convergence_window} steps)")
             break
     with torch.no_grad():
-        return Stage3Result(parameters.textures(), initial, frozen, history, views)
+        return Stage3Result(parameters.textures(), initial, frozen, history, term_history, views)
 
 
 def objective(context: StageContext, frozen: list[FrozenFrame], initial: Textures, human_prior=None):
@@ -110,18 +125,20 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
     palette, uv_mask = _palette(context, initial), _uv_mask(context, initial)
     texture_terms = _texture_terms_of(context, initial, palette, uv_mask)
 
-    def loss_of(textures: Textures) -> torch.Tensor:
-        loss = sum(_frame_loss(context, f, textures, human_prior) for f in frozen) / len(frozen)
-        return loss + texture_terms(textures) + context.scene_light_prior()
+    def loss_of(textures: Textures, terms: LossTerms | None = None) -> torch.Tensor:
+        terms = terms or LossTerms()
+        loss = sum(_frame_loss(context, f, textures, human_prior, terms, 1.0 / len(frozen))
+                   for f in frozen) / len(frozen)
+        loss = loss + texture_terms(textures, terms)
+        return loss + terms.add("scene_light_colour", context.scene_light_prior())
 
     return loss_of
 
 
-def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, object]:
+def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, RenderOutput]:
     """Shade a frozen frame with ``textures`` and the current kept lights; M_o stays frozen."""
     output = _shade(context, frame.geometry.mesh, frame.camera, frame.fragments, textures, frame.transfer)
-    rendered = context.compose(frame.index, output.images, output.mask, output.normals)
-    rendered.face_region = frame.face_region
+    rendered = context.compose(frame.index, output.images, output.mask, output.normals, frame.face_region)
     return rendered, output
 
 
@@ -132,33 +149,26 @@ def freeze_frames(context: StageContext, initial: Textures) -> list[FrozenFrame]
 @torch.no_grad()
 def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame:
     geometry = context.geometry(frame)
-    geometry = type(geometry)(
-        mesh=type(geometry.mesh)(geometry.mesh.vertices.detach(), *_topology(context)),
-        camera=type(geometry.camera)(
-            geometry.camera.focal.detach(), geometry.camera.rotation.detach(),
-            geometry.camera.translation.detach(), geometry.camera.width, geometry.camera.height),
+    geometry = FrameGeometry(
+        mesh=Mesh(geometry.mesh.vertices.detach(), *_topology(context)),
+        camera=Camera(geometry.camera.focal.detach(), geometry.camera.rotation.detach(),
+                      geometry.camera.translation.detach(), geometry.camera.width, geometry.camera.height),
     )
     camera = supersampled_camera(geometry.camera, context.config.render.supersampling)
     fragments = context.renderer.rasterize(geometry.mesh, camera)
     transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.render.shadows else None
     output = _shade(context, geometry.mesh, camera, fragments, initial, transfer)
     coverage = output.mask
-    face_region = context.decoupling.face_region(frame, coverage, context.target.face_classifier[frame])
-    reference = {"diffuse": output.diffuse, "specular": output.specular, "roughness": output.roughness}
+    face_region = context.decoupling.face_region(frame, coverage, context.inputs.face_classifier[frame])
+    reference = AlbedoReference(output.diffuse, output.specular, output.roughness)
     return FrozenFrame(frame, geometry, camera, fragments, transfer, face_region.detach(), reference)
 
 
-def _shade(context: StageContext, mesh, camera, fragments, textures: Textures, transfer, lights=None):
-    """Shade under ``lights`` [K, B*B, 3] (default: the kept lights), box-filtered to the working resolution."""
-    lights = context.scene.lights[context.decoupling.kept] if lights is None else lights
-    output = context.renderer.shade(mesh, camera, fragments, textures, lights, transfer)
-    return box_filter(output, context.config.render.supersampling)
-
-
-def relight_frozen(context: StageContext, frame: FrozenFrame, textures: Textures, lights: torch.Tensor):
-    """The face of a frozen frame under other ``lights`` [K, B*B, 3], summed (no light masks): [H, W, 3]."""
-    output = _shade(context, frame.geometry.mesh, frame.camera, frame.fragments, textures, frame.transfer, lights)
-    return output.images.sum(0)
+def _shade(context: StageContext, mesh, camera, fragments, textures: Textures, transfer) -> RenderOutput:
+    """Shade under the kept lights, box-filtered to the working resolution."""
+    return shade_supersampled(context.renderer, mesh, camera, fragments, textures,
+                              context.scene.lights[context.decoupling.kept], transfer,
+                              context.config.render.supersampling)
 
 
 def _topology(context: StageContext):
@@ -179,31 +189,34 @@ def _parameter_groups(context: StageContext, parameters: TextureParameters) -> l
     return groups
 
 
-def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, human_prior) -> torch.Tensor:
+def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, human_prior, terms: LossTerms,
+                scale: float) -> torch.Tensor:
     weights, priors, form = context.config.weights, context.config.priors, context.config.decouple.loss_form
     rendered, output = render_frozen(context, frame, textures)
-    loss = weights.photometric * context.photometric(frame.index, rendered)
-    loss = loss + context.key_light_exposure(frame.index, rendered)
+    loss = terms.add("photometric", weights.photometric * context.photometric(frame.index, rendered), scale)
+    loss = loss + terms.add("scene_light_level", context.key_light_exposure(frame.index, rendered), scale)
     if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
-        loss = loss + weights.binary * decouple_losses.binary_loss(rendered.light_masks, rendered.coverage,
-                                                                   form=form)
+        loss = loss + terms.add("binary", weights.binary * decouple_losses.binary_loss(
+            rendered.light_masks, rendered.coverage, form=form), scale)
     if priors.local_prior:
-        loss = loss + weights.local_prior * _local_prior(output, frame.reference, rendered.coverage,
-                                                         priors.local_prior_weights)
+        loss = loss + terms.add("local_prior", weights.local_prior * _local_prior(
+            output, frame.reference, rendered.coverage, priors.local_prior_weights), scale)
     if priors.human_prior and human_prior is not None:
-        loss = loss + weights.human_prior * human_prior(rendered.light_images, rendered.coverage)
+        loss = loss + terms.add("human_prior", weights.human_prior * human_prior(
+            rendered.light_images, rendered.coverage), scale)
     return loss
 
 
-def _local_prior(output, reference: dict, coverage: torch.Tensor, weights: tuple[float, float, float]) -> torch.Tensor:
+def _local_prior(output: RenderOutput, reference: AlbedoReference, coverage: torch.Tensor,
+                 weights: tuple[float, float, float]) -> torch.Tensor:
     """LP on screen-space albedo, ``weights`` x (diffuse, specular, roughness) (the authors' 5 / 6 / 1)."""
     diffuse, specular, roughness = weights
     prior = local_prior
-    if fast_stage3.enabled(output.diffuse, reference["diffuse"], coverage):
+    if fast_stage3.enabled(output.diffuse, reference.diffuse, coverage):
         prior = fast_stage3.local_prior_l1  # the same LP (5x5, L1), fused with its gradient
-    return (diffuse * prior(output.diffuse, reference["diffuse"], coverage)
-            + specular * prior(output.specular, reference["specular"], coverage)
-            + roughness * prior(output.roughness, reference["roughness"], coverage))
+    return (diffuse * prior(output.diffuse, reference.diffuse, coverage)
+            + specular * prior(output.specular, reference.specular, coverage)
+            + roughness * prior(output.roughness, reference.roughness, coverage))
 
 
 def _palette(context: StageContext, initial: Textures):
@@ -221,18 +234,23 @@ def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:
 
 
 def _texture_terms_of(context: StageContext, initial: Textures, palette, uv_mask):
-    """textures -> the texture-space terms: the fused kernels (deface/fit/fast_stage3.py) on the CPU, else
-    the torch reference :func:`_texture_terms`."""
+    """(textures, terms) -> the texture-space terms: the fused kernels (deface/fit/fast_stage3.py) on the CPU,
+    one named term for regularisers and GP together; else the torch reference :func:`_texture_terms`."""
     weights = context.config.weights
     if fast_stage3.enabled(initial.diffuse, initial.specular, initial.roughness, uv_mask):
-        return fast_stage3.TextureTerms(initial, uv_mask, palette, weights.texture_regulariser,
-                                        weights.global_prior)
-    return lambda textures: _texture_terms(context, textures, initial, palette, uv_mask)
+        fused = fast_stage3.TextureTerms(initial, uv_mask, palette, weights.texture_regulariser,
+                                         weights.global_prior)
+        name = "texture_regularisers" if palette is None else "texture_regularisers_and_global_prior"
+        return lambda textures, terms: terms.add(name, fused(textures))
+    return lambda textures, terms: _texture_terms(context, textures, initial, palette, uv_mask, terms)
 
 
-def _texture_terms(context: StageContext, textures: Textures, initial: Textures, palette, uv_mask) -> torch.Tensor:
+def _texture_terms(context: StageContext, textures: Textures, initial: Textures, palette, uv_mask,
+                   terms: LossTerms) -> torch.Tensor:
     weights = context.config.weights
-    loss = weights.texture_regulariser * texture_regularisers(textures, initial, uv_mask)
+    loss = terms.add("texture_regularisers",
+                     weights.texture_regulariser * texture_regularisers(textures, initial, uv_mask))
     if palette is not None:
-        loss = loss + weights.global_prior * global_prior(textures.diffuse, palette, uv_mask)
+        loss = loss + terms.add("global_prior", weights.global_prior * global_prior(textures.diffuse, palette,
+                                                                                     uv_mask))
     return loss

@@ -14,9 +14,12 @@ border (the face then looks smaller and further away) and upscaled to at least 3
 from __future__ import annotations
 
 from collections.abc import Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 
 import numpy as np
+
+from deface.landmarks.quiet import native_log_filter, quiet_environment
 
 NUM_LANDMARKS = 478
 MIN_RETRY_SIZE = 384  # tiny images are upscaled to this (longest side) before retrying
@@ -61,16 +64,24 @@ class FaceMeshDetector:
     """A MediaPipe Face Mesh instance (static or tracking mode); close it or use it as a context manager."""
 
     def __init__(self, static: bool = True, max_faces: int = 4, min_confidence: float = 0.5):
-        from mediapipe.python.solutions import face_mesh
+        quiet_environment()
+        # MediaPipe's threads print C++ notices until the graph is closed: filter for the detector's lifetime.
+        self._quiet = ExitStack()
+        self._quiet.enter_context(native_log_filter())
+        try:
+            from mediapipe.python.solutions import face_mesh
 
-        self.static = static
-        self._mesh = face_mesh.FaceMesh(
-            static_image_mode=static,
-            max_num_faces=max_faces,
-            refine_landmarks=True,
-            min_detection_confidence=min_confidence,
-            min_tracking_confidence=min_confidence,
-        )
+            self.static = static
+            self._mesh = face_mesh.FaceMesh(
+                static_image_mode=static,
+                max_num_faces=max_faces,
+                refine_landmarks=True,
+                min_detection_confidence=min_confidence,
+                min_tracking_confidence=min_confidence,
+            )
+        except BaseException:
+            self._quiet.close()
+            raise
 
     def __enter__(self) -> FaceMeshDetector:
         return self
@@ -79,7 +90,10 @@ class FaceMeshDetector:
         self.close()
 
     def close(self) -> None:
-        self._mesh.close()
+        try:
+            self._mesh.close()
+        finally:
+            self._quiet.close()
 
     def raw_faces(self, image: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Run MediaPipe once on uint8 [H, W, 3] -> [(points [478, 2], depth [478])] in MediaPipe's order."""

@@ -1,0 +1,213 @@
+"""The frozen result of a fit, :class:`FitOutput`: what export, eval, relight, transfer, turntable and the report
+consume (nothing outside deface/fit reaches into the stages). :func:`deface.export.load.load_fit` rebuilds
+the same object from an output folder.
+
+Shapes: T frames of H x W working pixels, V vertices, n initial lights, K kept, B*B SH coefficients.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from deface.fit.config import FitConfig
+from deface.fit.log import FitLog
+from deface.fit.scene import FrameGeometry, topology_tensors
+from deface.fit.state import FrameRender, StageContext, compose_face
+from deface.io.images import srgb_to_linear
+from deface.models.base import FaceModel
+from deface.render.camera import Camera
+from deface.render.mesh import Mesh, Textures
+from deface.render.renderer import Fragments, Renderer, ShadowTransfer
+from deface.render.supersample import shade_supersampled, supersampled_camera
+from deface.texture.confidence import TexelView
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """How the fit went: per-stage times and loss curves (total and named terms), notes, optional networks."""
+
+    seconds: dict[str, float]  # stage -> wall seconds
+    losses: dict[str, list[float]]  # stage -> total loss per step
+    terms: dict[str, list[dict[str, float]]]  # stage -> per step {term name: value}; they sum to the total
+    notes: list[str]  # what the log said (faces found, frames dropped, ACE, substitutes)
+    optional_networks: dict[str, str]  # name -> "used" or why not
+
+    @classmethod
+    def from_log(cls, log: FitLog, optional_networks: dict[str, str]) -> RunRecord:
+        return cls(dict(log.seconds), {k: list(v) for k, v in log.losses.items()},
+                   {k: list(v) for k, v in log.terms.items()}, list(log.notes), dict(optional_networks))
+
+
+@dataclass(frozen=True)
+class FinishedTextures:
+    """Stage 3's maps after texture completion, and what the frames tell about each texel (deface/fit/texels.py)."""
+
+    textures: Textures  # the final UV maps (completed where no frame saw the texel, when completion is on)
+    seen: np.ndarray  # [Ht, Wt] visible x h x facing, best frame (what completion went by)
+    confidence: np.ndarray  # [Ht, Wt] how well the frames constrain each texel
+
+
+@dataclass(frozen=True)
+class OutputFrame:
+    """One fitted frame: frozen geometry, shadow transfer, the photo and the masks of the fit."""
+
+    geometry: FrameGeometry  # posed mesh (detached) and the working-resolution camera
+    transfer: ShadowTransfer | None  # self-shadowing of this mesh (None without shadows)
+    photo_srgb: np.ndarray  # [H, W, 3] float32 working-resolution input, sRGB in [0, 1]
+    face_classifier: torch.Tensor  # [H, W] h
+    light_masks: torch.Tensor  # [K, H, W] M_L of the kept lights
+    face_region: torch.Tensor  # [H, W] M_o
+    landmarks: np.ndarray  # [P, 2] the detected MediaPipe points, working pixels
+    cast: tuple[Camera, Fragments]  # the supersampled camera and what covers each of its samples
+
+    @property
+    def photo(self) -> torch.Tensor:
+        """[H, W, 3] the input, linear RGB."""
+        return torch.as_tensor(srgb_to_linear(self.photo_srgb), dtype=torch.float32)
+
+
+@dataclass(frozen=True)
+class FitOutput:
+    """A finished fit. ``render`` re-renders it with other textures, lights or a camera."""
+
+    model: FaceModel
+    config: FitConfig  # the config the fit ran with
+    frames: tuple[OutputFrame, ...]  # T
+    identity: torch.Tensor  # [Ki]
+    expression: torch.Tensor  # [T, Ke]
+    rotation: torch.Tensor  # [T, 3] axis-angle, model -> camera
+    translation: torch.Tensor  # [T, 3] cm
+    focal: torch.Tensor  # [] pixels at working resolution
+    albedo: torch.Tensor  # [Ka] albedo-model coefficients
+    tone: float  # ITA degrees on the albedo model's tone axis (its start value when the tone is not free)
+    lights: torch.Tensor  # [n, B*B, 3] every light's SH (stage-3 values); only ``kept`` are used
+    kept: tuple[int, ...]  # indices of the lights ACE kept
+    textures: Textures  # the final UV maps
+    initial_textures: Textures | None  # T^0 from the albedo model (None when loaded from files)
+    seen: np.ndarray | None  # [Ht, Wt] how squarely some frame saw each texel inside h (None: unknown)
+    confidence: np.ndarray | None  # [Ht, Wt] how well the frames constrain each texel (None: unknown)
+    views: tuple[TexelView, ...]  # per frame: where each texel lands and how it is seen
+    illuminant: dict | None  # the scene's illuminant estimate (its record), None when not estimated
+    scale: float  # working / original resolution
+    kept_frames: list[int] | None  # positions of the fitted frames among the input's (None: all)
+    record: RunRecord
+    renderer: Renderer  # the fit's renderer settings (bands, shadows, rays, seed)
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.frames)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(W, H) working resolution."""
+        camera = self.frames[0].geometry.camera
+        return camera.width, camera.height
+
+    @property
+    def kept_lights(self) -> torch.Tensor:
+        """[K, B*B, 3] the lights the fit renders with."""
+        return self.lights[list(self.kept)]
+
+    @property
+    def bands(self) -> int:
+        return int(round(self.lights.shape[1] ** 0.5))
+
+    @classmethod
+    @torch.no_grad()
+    def from_stages(cls, context: StageContext, stage3, finished: FinishedTextures, record: RunRecord) -> FitOutput:
+        """The output of stages 2-3 (``stage3``: :class:`~deface.fit.stage3.Stage3Result`) and of the texture
+        completion (``finished``)."""
+        from deface.fit.stage3 import render_frozen
+
+        scene, target, config = context.scene, context.target, context.config
+        frames = []
+        for frozen in stage3.frozen:
+            rendered, _ = render_frozen(context, frozen, finished.textures)
+            frames.append(OutputFrame(
+                frozen.geometry, frozen.transfer, np.asarray(target.frames_srgb[frozen.index], dtype=np.float32),
+                context.inputs.face_classifier[frozen.index], rendered.light_masks.detach(),
+                rendered.face_region.detach(), np.asarray(target.landmarks[frozen.index].points),
+                (frozen.camera, frozen.fragments)))
+        tone = float(scene.tone.detach())
+        light = context.inputs.scene_light
+        return cls(
+            context.model, config, tuple(frames), *(p.detach().clone() for p in (
+                scene.identity, scene.expression, scene.rotation, scene.translation, scene.focal, scene.albedo)),
+            tone, scene.lights.detach().clone(), tuple(context.decoupling.kept), finished.textures, stage3.initial,
+            finished.seen, finished.confidence, tuple(stage3.views),
+            light.illuminant.record() if light is not None else None, target.scale, target.kept_frames, record,
+            context.renderer)
+
+    def export_vertices(self) -> np.ndarray:
+        """[V, 3] cm: a photo's fitted mesh, or a clip's identity with a neutral expression."""
+        expression = self.expression[0] if self.num_frames == 1 else torch.zeros_like(self.expression[0])
+        with torch.no_grad():
+            return self.model.vertices(self.identity, expression).numpy()
+
+    @torch.no_grad()
+    def render(self, textures: Textures | None = None, lights: torch.Tensor | None = None,
+               camera: Camera | Callable | None = None) -> list[FrameRender]:
+        """Per-frame renders with the fit's geometry and shadows.
+
+        - ``textures``: UV maps (default: the fit's own);
+        - ``lights`` [K', B*B, 3] in the model frame (default: the kept lights with their masks M_L);
+        - ``camera``: a working-resolution :class:`Camera` for every frame, or a function
+          ``frame -> Camera`` (default: each frame's fitted camera, with M_o).
+
+        With the fit's own lights and cameras this is the fit's I_R. With other lights or cameras the light
+        masks (which belong to the fit's pixels) are not used: every light counts fully (M_L = 1), and M_o is
+        the coverage when the camera differs.
+        """
+        textures = textures or self.textures
+        own_lights = lights is None
+        lights = self.kept_lights if own_lights else lights.to(torch.float32)
+        renders = []
+        for index, frame in enumerate(self.frames):
+            view = camera(index) if callable(camera) else camera
+            if view is None:
+                cast_camera, fragments = frame.cast
+            else:
+                cast_camera = supersampled_camera(view, self.config.render.supersampling)
+                fragments = self.renderer.rasterize(frame.geometry.mesh, cast_camera)
+            output = shade_supersampled(self.renderer, frame.geometry.mesh, cast_camera, fragments, textures,
+                                        lights, frame.transfer, self.config.render.supersampling)
+            if own_lights and view is None:
+                masks = frame.light_masks
+            else:
+                masks = torch.ones(output.images.shape[:3])
+            region = frame.face_region if view is None else output.mask
+            renders.append(FrameRender(output.images, output.mask, masks, region,
+                                       compose_face(output.images, masks), None, output.normals))
+        return renders
+
+    def composite(self, rendered: FrameRender, frame: int) -> torch.Tensor:
+        """I_out [H, W, 3] linear: the face where M_o says so, the input elsewhere."""
+        weight = rendered.face_region[..., None]
+        return rendered.face * weight + self.frames[frame].photo * (1 - weight)
+
+
+@dataclass(frozen=True)
+class StoredPose:
+    """The scene-parameter fields :func:`frame_geometry` reads, from a frozen fit."""
+
+    identity: torch.Tensor
+    expression: torch.Tensor
+    rotation: torch.Tensor
+    translation: torch.Tensor
+    focal: torch.Tensor
+
+    def camera(self, frame: int, width: int, height: int) -> Camera:
+        return Camera(self.focal, self.rotation[frame], self.translation[frame], width, height)
+
+
+def frozen_geometry(model: FaceModel, pose: StoredPose, frame: int, size: tuple[int, int]) -> FrameGeometry:
+    """A frame's detached geometry from stored parameters (what stage 3 froze)."""
+    topology = topology_tensors(model)
+    with torch.no_grad():
+        vertices = model.vertices(pose.identity, pose.expression[frame])
+    mesh = Mesh(vertices, topology["triangles"], topology["uvs"], topology["triangle_uvs"])
+    return FrameGeometry(mesh, pose.camera(frame, *size))

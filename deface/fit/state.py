@@ -1,0 +1,229 @@
+"""The typed state that stages 2 and 3 share (see the data-flow drawing in docs/design.md).
+
+Shapes: T frames of H x W working pixels, V mesh vertices, N landmark correspondences, n initial lights
+and K kept lights with B*B SH coefficients per colour.
+
+- :class:`FitInputs` (frozen): what the fit is fitted to once stage 1 has run: the frames
+  (:class:`~deface.fit.target.FitTarget`), the landmark targets of L_lan, the face-region classifier h and
+  the scene's light (illuminant estimate and the cheek/forehead pixels of its level term).
+- :class:`PosedFace` (frozen): the face model posed by the trainable scene parameters, with the renderer;
+  the geometry and coverage of each frame at the parameters' current values.
+- the trainable parameters: :class:`~deface.fit.scene.SceneParameters` (coefficients, pose, focal, lights,
+  tone) and :class:`~deface.fit.decoupling.Decoupling` (fields f and g, kept lights). Optimisers change
+  them in place; nothing else does.
+- :class:`StageContext` (frozen): the above plus config, log and the per-frame shadow-transfer caches;
+  the helpers every stage uses to render a frame and score it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from deface.fit.config import FitConfig
+from deface.fit.decoupling import Decoupling
+from deface.fit.log import FitLog
+from deface.fit.scene import FrameGeometry, SceneParameters, frame_geometry, topology_tensors
+from deface.fit.target import FitTarget
+from deface.io.images import LUMINANCE
+from deface.landmarks.correspondence import Correspondence, model_landmarks
+from deface.losses.illuminant import exposure_term, front_directions, key_light_level, light_colour_term
+from deface.losses.landmarks import landmark_loss
+from deface.losses.photometric import photometric_loss
+from deface.models.base import FaceModel
+from deface.priors.illuminant import IlluminantEstimate
+from deface.render.mesh import Textures
+from deface.render.renderer import Fragments, Renderer, ShadowTransferCache
+
+
+@dataclass(frozen=True)
+class LandmarkTarget:
+    """L_lan's target: the detected points in the correspondence's order."""
+
+    correspondence: Correspondence  # MediaPipe point -> model surface point
+    detected: torch.Tensor  # [T, N, 2] detected points at working resolution, pixels
+    weights: torch.Tensor  # [N] per-point weights of the correspondence
+
+    def loss(self, geometry: FrameGeometry, frame: int) -> torch.Tensor:
+        """L_lan as in the authors' code: weighted mean squared pixel distance of the projected points
+        of ``geometry`` (the frame's posed mesh and camera)."""
+        points, _ = geometry.camera.project(model_landmarks(geometry.mesh.vertices, self.correspondence))
+        return landmark_loss(points, self.detected[frame], 1.0, self.weights, squared=True)
+
+
+@dataclass(frozen=True)
+class SceneLight:
+    """The scene's light as the scene-light terms see it (``tone.scene_light_prior``)."""
+
+    illuminant: IlluminantEstimate  # white level and colour temperature read off the photo
+    regions: tuple[torch.Tensor, ...] | None  # T x [H, W] bool cheek/forehead skin (None: too little skin)
+
+
+@dataclass(frozen=True)
+class FitInputs:
+    """Everything stages 2 and 3 fit to; fixed once stage 1 and the face-region classifier have run."""
+
+    target: FitTarget  # frames (sRGB and linear), detected landmarks, working scale
+    landmarks: LandmarkTarget  # L_lan's target
+    face_classifier: tuple[torch.Tensor, ...]  # T x [H, W] h in [0, 1]
+    scene_light: SceneLight | None = None  # None without the scene-light prior
+
+    @property
+    def num_frames(self) -> int:
+        return self.target.num_frames
+
+
+@dataclass(frozen=True)
+class PosedFace:
+    """The face model posed by ``scene``'s current values, and the renderer that draws it."""
+
+    model: FaceModel
+    scene: SceneParameters  # trainable, changed in place by the optimisers
+    topology: dict[str, torch.Tensor]  # triangles [F, 3], uvs [Vt, 2], triangle_uvs [F, 3]
+    renderer: Renderer
+    size: tuple[int, int]  # (W, H) working resolution
+
+    @classmethod
+    def create(cls, model: FaceModel, scene: SceneParameters, config: FitConfig, size: tuple[int, int]):
+        return cls(model, scene, topology_tensors(model), Renderer(FitTarget.render_config(config)), size)
+
+    def geometry(self, frame: int) -> FrameGeometry:
+        return frame_geometry(self.model, self.scene, self.topology, frame, self.size)
+
+    def fragments(self, frame: int) -> tuple[FrameGeometry, Fragments]:
+        """The frame's geometry and what covers each working pixel."""
+        geometry = self.geometry(frame)
+        return geometry, self.renderer.rasterize(geometry.mesh, geometry.camera)
+
+
+@dataclass(frozen=True)
+class FrameRender:
+    """One frame's render: per-light images, buffers, masks and the composed face."""
+
+    light_images: torch.Tensor  # [K, H, W, 3] I_Rs (kept lights)
+    coverage: torch.Tensor  # [H, W] M_R
+    light_masks: torch.Tensor  # [K, H, W] M_L
+    face_region: torch.Tensor  # [H, W] M_o
+    face: torch.Tensor  # [H, W, 3] I_R
+    region_probability: torch.Tensor | None = None  # [H, W] g (None without the field g or when M_o is frozen)
+    normals: torch.Tensor | None = None  # [H, W, 3] unit normals of the render (model frame)
+
+
+def compose_face(light_images: torch.Tensor, light_masks: torch.Tensor) -> torch.Tensor:
+    """I_R [H, W, 3] = sum_k M_L[k] I_Rs[k] from ``light_images`` [K, H, W, 3] and ``light_masks`` [K, H, W]."""
+    return (light_images * light_masks[..., None]).sum(0)
+
+
+@dataclass(frozen=True)
+class StageContext:
+    """What stages 2 and 3 share: inputs, the posed face, the trainable parameters, config, log, caches."""
+
+    inputs: FitInputs
+    face: PosedFace
+    decoupling: Decoupling  # trainable: f, g and the kept lights
+    config: FitConfig
+    log: FitLog
+    shadow_caches: tuple[ShadowTransferCache, ...]  # one per frame
+
+    @classmethod
+    def create(cls, inputs: FitInputs, face: PosedFace, decoupling: Decoupling, config: FitConfig,
+               log: FitLog) -> StageContext:
+        caches = tuple(ShadowTransferCache(face.renderer) for _ in range(inputs.num_frames))
+        return cls(inputs, face, decoupling, config, log, caches)
+
+    @property
+    def model(self) -> FaceModel:
+        return self.face.model
+
+    @property
+    def scene(self) -> SceneParameters:
+        return self.face.scene
+
+    @property
+    def renderer(self) -> Renderer:
+        return self.face.renderer
+
+    @property
+    def topology(self) -> dict[str, torch.Tensor]:
+        return self.face.topology
+
+    @property
+    def target(self) -> FitTarget:
+        return self.inputs.target
+
+    def geometry(self, frame: int) -> FrameGeometry:
+        return self.face.geometry(frame)
+
+    def albedo_textures(self, size: int | None = None) -> Textures:
+        """The albedo model's maps at the fitted coefficients (and tone, when the tone is free), ``size``
+        texels square (default: ``config.stage2_texture_size``)."""
+        size = size or self.config.stage2_texture_size
+        ita = self.scene.tone if self.config.tone.free_tone else None
+        diffuse, specular = self.model.albedo.textures(self.scene.albedo, size, ita)
+        roughness = torch.full((*diffuse.shape[:2], 1), self.model.albedo.roughness_default)
+        return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
+
+    def scene_light_prior(self) -> torch.Tensor:
+        """The scene-light colour term for the kept lights (0 when off or without an estimate)."""
+        tone, light = self.config.tone, self.inputs.scene_light
+        if not tone.scene_light_prior or light is None:
+            return torch.zeros(())
+        white = torch.as_tensor(light.illuminant.white, dtype=torch.float32)
+        colour = light_colour_term(self.scene.lights[self.decoupling.kept], white, front_directions())
+        return tone.weight * colour / tone.colour_sigma**2
+
+    def key_light_exposure(self, frame: int, rendered: FrameRender) -> torch.Tensor:
+        """The scene-light level term of one frame: the brightest light's level on the cheeks and forehead
+        (0 when off)."""
+        tone, light = self.config.tone, self.inputs.scene_light
+        if (not tone.scene_light_prior or light is None or light.regions is None or rendered.normals is None):
+            return torch.zeros(())
+        level = key_light_level(self.scene.lights[self.decoupling.kept], rendered.normals, light.regions[frame])
+        target = float(light.illuminant.white @ LUMINANCE)
+        return tone.weight * exposure_term(level, target) / tone.exposure_sigma**2
+
+    def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool,
+                     geometry: FrameGeometry | None = None) -> FrameRender:
+        geometry = geometry or self.geometry(frame)
+        fragments = self.renderer.rasterize(geometry.mesh, geometry.camera)
+        transfer = self._transfer(frame, geometry.mesh, refresh_shadows)
+        kept = self.decoupling.kept
+        output = self.renderer.shade(geometry.mesh, geometry.camera, fragments, textures,
+                                     self.scene.lights[kept], transfer)
+        return self.compose(frame, output.images, output.mask, output.normals)
+
+    def compose(self, frame: int, light_images: torch.Tensor, coverage: torch.Tensor,
+                normals: torch.Tensor | None = None, face_region: torch.Tensor | None = None) -> FrameRender:
+        """The frame's render from per-light images: f's masks, and M_o (``face_region`` when frozen)."""
+        light_masks = self.decoupling.light_masks(frame, coverage)
+        probability = None
+        if face_region is None:
+            probability = self.decoupling.region_probability(frame, coverage)
+            face_region = self.decoupling.face_region(frame, coverage, self.inputs.face_classifier[frame],
+                                                      probability)
+        return FrameRender(light_images, coverage, light_masks, face_region,
+                           compose_face(light_images, light_masks), probability, normals)
+
+    def _transfer(self, frame: int, mesh, refresh: bool):
+        if not self.config.render.shadows:
+            return None
+        cache = self.shadow_caches[frame]
+        return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
+
+    def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
+        return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
+                                rendered.coverage, blur=self.config.render.render_blur,
+                                form=self.config.decouple.loss_form)
+
+
+class LossTerms:
+    """Named loss terms of one step: ``add`` passes a term through (the total is summed by the caller in
+    its own order, so totals stay bit-identical) and keeps its value under its name."""
+
+    def __init__(self):
+        self.values: dict[str, float] = {}
+
+    def add(self, name: str, value: torch.Tensor, scale: float = 1.0) -> torch.Tensor:
+        self.values[name] = self.values.get(name, 0.0) + float(value.detach()) * scale
+        return value

@@ -1,0 +1,1 @@
+"""Human-readable reports of fits: report.html per fit, index.html per batch."""
