@@ -194,8 +194,8 @@ class ProgressLog(FitLog):
         super().start(stage)
         self._report((stage, 0, 0))
 
-    def step(self, stage: str, step: int, total: int, loss: float) -> None:
-        super().step(stage, step, total, loss)
+    def step(self, stage: str, step: int, total: int, loss: float, terms: dict[str, float] | None = None) -> None:
+        super().step(stage, step, total, loss, terms)
         if self._throttle():
             self._report((stage, step + 1, total))
 
