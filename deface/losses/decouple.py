@@ -27,10 +27,9 @@ from __future__ import annotations
 
 import torch
 
-from deface.decouple.ace import AREA_NORMALISERS, area_denominator, as_frames
+from deface.decouple.ace import area_denominator, as_frames
 
 FORMS = ("code", "paper")
-NORMALISERS = AREA_NORMALISERS
 
 
 def _spread_loss(masks, coverage, centres, form, normaliser) -> torch.Tensor:

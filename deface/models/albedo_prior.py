@@ -24,7 +24,6 @@ Region tints and variation amplitudes are this project's design choices (documen
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 from scipy import ndimage
@@ -343,15 +342,4 @@ def _fit_range(mean: np.ndarray, basis: np.ndarray, config: AlbedoPriorConfig) -
     return basis * scale
 
 
-@lru_cache(maxsize=4)
-def ict_albedo_prior(models_dir: str | None = None, config: AlbedoPriorConfig | None = None) -> AlbedoModel:
-    """The (cached) prior for the ICT-FaceKit face area."""
-    from deface.models.ict import load_ict_geometry
-
-    model = load_ict_geometry(models_dir)
-    return build_albedo_prior(
-        model.uvs, model.triangle_uvs, model.triangles, model.mean_shape, model.landmarks_68, config
-    )
-
-
-__all__ = ["AlbedoPriorConfig", "build_albedo_prior", "ict_albedo_prior", "fill_outside", "vertex_uvs"]
+__all__ = ["AlbedoPriorConfig", "build_albedo_prior", "fill_outside", "vertex_uvs"]

@@ -14,7 +14,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from deface.models.base import FaceModel
+from deface.models.albedo_prior import AlbedoPriorConfig, build_albedo_prior
+from deface.models.base import AlbedoModel, FaceModel
 from deface.paths import ModelFileError, find_model_file
 
 ICT_PACK = "ict-facekit/ict_face_area_v9409_f16.npz"
@@ -65,9 +66,16 @@ def load_ict_geometry(models_dir: str | os.PathLike | None = None) -> FaceModel:
 
 @lru_cache(maxsize=4)
 def _load_with_albedo(models_dir: str | None) -> FaceModel:
-    from deface.models.albedo_prior import ict_albedo_prior
-
     return dataclasses.replace(_load_geometry(models_dir), albedo=ict_albedo_prior(models_dir))
+
+
+@lru_cache(maxsize=4)
+def ict_albedo_prior(models_dir: str | None = None, config: AlbedoPriorConfig | None = None) -> AlbedoModel:
+    """The (cached) project albedo prior for the ICT-FaceKit face area (docs/albedo-prior.md)."""
+    model = load_ict_geometry(models_dir)
+    return build_albedo_prior(
+        model.uvs, model.triangle_uvs, model.triangles, model.mean_shape, model.landmarks_68, config
+    )
 
 
 def load_ict(models_dir: str | os.PathLike | None = None) -> FaceModel:

@@ -85,20 +85,3 @@ class Camera:
     def center_in_model(self) -> torch.Tensor:
         """Camera centre in the model frame [3]."""
         return -(self.rotation_matrix.T @ self.translation)
-
-    def pixel_rays(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Rays through pixel centres in the model frame: origins [H*W, 3], unit directions [H*W, 3]."""
-        ys, xs = torch.meshgrid(
-            torch.arange(self.height, dtype=torch.float64) + 0.5,
-            torch.arange(self.width, dtype=torch.float64) + 0.5,
-            indexing="ij",
-        )
-        focal = float(self.focal)
-        dirs_cam = torch.stack(
-            [(xs - self.width / 2) / focal, (ys - self.height / 2) / focal, torch.ones_like(xs)], -1
-        ).reshape(-1, 3)
-        rot = self.rotation_matrix.detach().double()
-        dirs = dirs_cam @ rot  # camera -> model: R^T d
-        dirs = dirs / dirs.norm(dim=-1, keepdim=True)
-        origins = self.center_in_model().detach().double().expand_as(dirs)
-        return origins, dirs

@@ -64,12 +64,6 @@ def sh_band_sums(directions: torch.Tensor, coeffs: torch.Tensor) -> torch.Tensor
     return kernels.sh_band_sums(directions, coeffs)
 
 
-def band_of_index(bands: int, device: torch.device | None = None) -> torch.Tensor:
-    """Band l of every coefficient index [bands²] (long)."""
-    levels = torch.arange(bands, device=device)
-    return torch.repeat_interleave(levels, 2 * levels + 1)
-
-
 def cosine_lobe_band(l: int) -> float:  # noqa: E741
     """A_l of the clamped-cosine kernel max(cos, 0) (Ramamoorthi & Hanrahan 2001, "An efficient
     representation for irradiance environment maps", eq. 8-9): irradiance E_lm = A_l L_lm.
