@@ -32,8 +32,7 @@ def main() -> None:
 
     def slow_fit(frames, config, **_):
         _pause(mode, "fit", float(seconds))
-        decoupling = SimpleNamespace(kept=[0])  # what the record reads of a result
-        return SimpleNamespace(frames=len(frames), context=SimpleNamespace(decoupling=decoupling))
+        return SimpleNamespace(frames=len(frames), kept=(0,))  # what the record reads of a result (FitOutput.kept)
 
     def slow_write(result, folder, record):
         with staged_directory(folder) as staging:
