@@ -126,12 +126,13 @@ def _run_stages(target: FitTarget, config: FitConfig, models_dir, log: FitLog) -
 @torch.no_grad()
 def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedTextures:
     """Complete the texels no frame showed, and measure how well the frames constrain each texel."""
+    # One render serves both maps: M_o is frozen, and the confidence's light fraction is a ratio of per-light
+    # renders at a pixel, in which the albedo (and so the completion of texels no frame showed) cancels.
     renders = [render_frozen(context, frame, stage3.textures)[0] for frame in stage3.frozen]
     seen = seen_texels(stage3.views, [rendered.face_region for rendered in renders])
     textures = stage3.textures
     if context.config.completion.enabled:
         textures = complete_textures(context.model, textures, stage3.initial, seen, context.config.completion)
-        renders = [render_frozen(context, frame, textures)[0] for frame in stage3.frozen]
     return FinishedTextures(textures, seen, texture_confidence(stage3.views, renders))
 
 
