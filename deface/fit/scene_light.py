@@ -2,19 +2,36 @@
 
 With light masks, a fit that starts from the paper's light values and the model's mean skin can explain a
 dark skin as a light skin under a dim light condition that f spreads over the face: the scene-light prior
-holds only the brightest light to the scene's white level W, and the tone moves a fraction of a degree per
-step. So the fit starts where the scene says it is:
+holds only the brightest light to the scene's white level W, and the tone and the light's level trade freely
+against each other in stage 2 (the fitted tone stays within a few degrees of its start). So the fit starts
+where the scene says it is:
 - the initial lights are scaled per channel so the brightest one's peak white response is W (their ratios,
   signs and SH structure, which ACE and f depend on, are kept);
-- the tone starts at the ITA of the photo's lit skin (unclipped cheek and forehead pixels at least half as
-  bright as their 90th percentile, :mod:`deface.models.ita`, without the brightest tenth, where the
-  specular highlight is - a larger share of a dark skin's light, so leaving it in would lighten dark skins)
-  divided by W and by ``LIT_SKIN_SHADING``. Stage 2 then refines both;
+- the tone starts at the ITA of the skin's colour in the key light over W (:func:`lit_skin_albedo`);
 - the skin pixels of the cheeks and forehead are kept (``SceneLight.regions``) for the scene-light prior's
   level term.
+
+The skin's colour in the key light must not depend on what else darkens or lightens the face: a hat brim,
+leaves or a hand casting a shadow over the cheeks (the same person must get the same tone with and without
+it), a highlight (a larger share of a dark skin's light, so leaving it in lightens dark skins), a clipped
+channel (the red of a light skin under a warm light). :func:`lit_skin_albedo` therefore reads it over the
+whole face, not only the measured regions:
+1. skin: pixels h calls skin whose chromaticity is within ``SKIN_CHROMA`` of the cheeks' and forehead's
+   median (a cast shadow keeps the chromaticity; hair, beard, a white turban, glasses do not);
+2. lit: an upper envelope of the green level over the normals, y = a0 + a . n (the Lambertian key light plus
+   ambient, linear in n on the lit side), fitted to the pixels within ``LIT_BAND`` of it and refitted:
+   pixels in a cast or attached shadow fall below the band and leave the fit;
+3. no highlights: pixels whose normal is within ``HIGHLIGHT_COS`` of the half vector between the key light
+   (a / |a|) and the camera are left out;
+4. level: the ``KEY_QUANTILE`` (90th percentile) of the green level of the lit skin, the same quantile the
+   scene-light level term holds the key light's white response to on the face (so start and prior agree);
+   green because a skin's red clips first and its blue is the noisiest; the colour: each channel's median
+   ratio to green over the lit pixels where that channel is not clipped.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -22,11 +39,25 @@ import torch
 from deface.fit.state import SceneLight
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import KEY_QUANTILE, front_directions, peak_white
-from deface.models.ita import CLIPPED, in_tone_boxes, ita_of_srgb, lit_skin, pixel_uvs
+from deface.models.ita import CLIPPED, MIN_PIXELS, in_tone_boxes, ita_of_srgb, pixel_uvs
 
-LIT_SKIN_SHADING = 0.85
-"""The light on lit cheeks and forehead as a fraction of the key light's level facing it: a typical cosine of
-about 30 degrees between those surfaces and a portrait's key light."""
+SKIN_CHROMA = 0.03
+"""Largest difference in rgb chromaticity (r, g, b over their sum) from the cheeks' skin."""
+LIT_BAND = (0.85, 1.25)
+"""A pixel whose level lies within this fraction of the key-light envelope's is lit."""
+HIGHLIGHT_COS = 0.87
+"""Normals within about 30 degrees of the half vector carry the specular highlight."""
+LEVEL_CHANNEL = 1  # green
+
+
+@dataclass(frozen=True)
+class SkinPixels:
+    """The face's pixels h calls skin, over all frames (model frame directions)."""
+
+    srgb: np.ndarray  # [N, 3] in [0, 1]
+    normals: np.ndarray  # [N, 3] unit
+    to_camera: np.ndarray  # [N, 3] unit, from the surface to the camera
+    in_boxes: np.ndarray  # [N] bool: the cheeks and forehead (deface.models.ita.TONE_BOXES)
 
 
 def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Tensor:
@@ -36,6 +67,79 @@ def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Ten
     if bool((brightest <= 0).any()):
         return lights
     return lights * (torch.as_tensor(white, dtype=lights.dtype) / brightest)
+
+
+@torch.no_grad()
+def skin_pixels(face, frames_srgb: list[np.ndarray], classifier) -> SkinPixels:
+    """The skin pixels of ``face`` (a :class:`~deface.fit.state.PosedFace`) that h (``classifier``) keeps."""
+    parts = []
+    for frame, h in enumerate(classifier):
+        geometry, fragments = face.fragments(frame)
+        mesh, covered = geometry.mesh, fragments.covered
+        skin = h.numpy().reshape(-1)[covered.numpy()] > 0.5
+        corners = mesh.vertices[mesh.triangles[fragments.covered_triangles]]  # [N, 3, 3]
+        points = (fragments.covered_barycentrics[..., None] * corners).sum(1)
+        normals = torch.nn.functional.normalize(mesh.face_normals()[fragments.covered_triangles], dim=-1)
+        to_camera = torch.nn.functional.normalize(geometry.camera.center_in_model() - points, dim=-1)
+        uv = pixel_uvs(fragments, mesh).reshape(-1, 2)[covered.numpy()]
+        srgb = frames_srgb[frame].reshape(-1, 3)[covered.numpy()]
+        parts.append((srgb[skin], normals.numpy()[skin], to_camera.numpy()[skin], in_tone_boxes(uv)[skin]))
+    return SkinPixels(*(np.concatenate([p[i] for p in parts]) for i in range(4)))
+
+
+def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
+    """Linear RGB [3]: the skin's colour in the key light over the white level ``white`` [3] (the module doc);
+    None when too little skin is seen."""
+    balanced = srgb_to_linear(pixels.srgb) / np.asarray(white)
+    unclipped = pixels.srgb < CLIPPED  # [N, 3]
+    skin = _skin_coloured(balanced, unclipped, pixels.in_boxes)
+    level = balanced[:, LEVEL_CHANNEL]
+    usable = skin & unclipped[:, LEVEL_CHANNEL]
+    if usable.sum() < MIN_PIXELS:
+        return None
+    lit = _key_lit(level, pixels, usable)
+    if lit.sum() < MIN_PIXELS:
+        return None
+    ratios = [np.median(balanced[lit & unclipped[:, c], c] / level[lit & unclipped[:, c]])
+              if (lit & unclipped[:, c]).sum() >= MIN_PIXELS else np.nan for c in range(3)]
+    if not np.all(np.isfinite(ratios)):
+        return None
+    return np.quantile(level[lit], KEY_QUANTILE) * np.asarray(ratios)
+
+
+def _skin_coloured(balanced: np.ndarray, unclipped: np.ndarray, in_boxes: np.ndarray) -> np.ndarray:
+    """[N] bool: pixels whose chromaticity is within SKIN_CHROMA of the cheeks' and forehead's median."""
+    chroma = balanced / np.maximum(balanced.sum(-1, keepdims=True), 1e-6)
+    reference = unclipped.all(-1) & in_boxes & (balanced.sum(-1) > 1e-3)
+    if reference.sum() < MIN_PIXELS:
+        reference = unclipped.all(-1)
+    if not reference.any():
+        return np.zeros(len(balanced), dtype=bool)
+    return np.abs(chroma - np.median(chroma[reference], axis=0)).max(-1) < SKIN_CHROMA
+
+
+def _key_lit(level: np.ndarray, pixels: SkinPixels, usable: np.ndarray, refits: int = 5) -> np.ndarray:
+    """[N] bool: usable pixels on the key light's upper envelope over the normals, highlights left out."""
+    design = np.concatenate([np.ones((len(level), 1)), pixels.normals], 1)
+    candidates = usable & (level >= 0.5 * np.quantile(level[usable], KEY_QUANTILE))
+    lit = candidates
+    for step in range(refits + 2):
+        if lit.sum() < 4:
+            return lit
+        coef = np.linalg.lstsq(design[lit], level[lit], rcond=None)[0]
+        if step >= refits:  # the last fits leave out the highlight of the light found so far
+            candidates = candidates & ~_highlight(coef[1:], pixels)
+        ratio = level / np.maximum(design @ coef, 1e-6)
+        lit = candidates & (ratio > LIT_BAND[0]) & (ratio < LIT_BAND[1])
+    return lit & ~_highlight(coef[1:], pixels)
+
+
+def _highlight(direction: np.ndarray, pixels: SkinPixels) -> np.ndarray:
+    """[N] bool: pixels whose normal is within HIGHLIGHT_COS of the half vector of light ``direction``."""
+    light = direction / max(np.linalg.norm(direction), 1e-9)
+    half = light + pixels.to_camera
+    half /= np.maximum(np.linalg.norm(half, axis=-1, keepdims=True), 1e-9)
+    return (pixels.normals * half).sum(-1) >= HIGHLIGHT_COS
 
 
 @torch.no_grad()
@@ -51,18 +155,6 @@ def tone_regions(face, classifier) -> list[np.ndarray]:
     return regions
 
 
-def photo_skin_ita(frames_srgb: list[np.ndarray], regions: list[np.ndarray], white: np.ndarray) -> float | None:
-    """The ITA of the photo's most lit skin as albedo under white level ``white`` (None: too little skin)."""
-    srgb = np.concatenate([frames_srgb[f][r] for f, r in enumerate(regions)])
-    srgb = srgb[srgb.max(-1) < CLIPPED]
-    if len(srgb) < 12:
-        return None
-    luminance = srgb_to_linear(srgb) @ LUMINANCE
-    lit = lit_skin(srgb) & (luminance <= np.percentile(luminance, 100 * KEY_QUANTILE))
-    albedo = np.median(srgb_to_linear(srgb[lit]), axis=0) / (np.asarray(white) * LIT_SKIN_SHADING)
-    return ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
-
-
 def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant, config, log) -> SceneLight:
     """Scale ``face.scene``'s initial lights to the scene's white level and start the tone at the photo's (in
     place); returns the scene light the scene-light terms hold the fit to."""
@@ -72,11 +164,12 @@ def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant
     regions = tone_regions(face, classifier)
     kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= 12 else None
     if config.tone.free_tone:
-        ita = photo_skin_ita(frames_srgb, regions, white)
-        if ita is not None:
+        albedo = lit_skin_albedo(skin_pixels(face, frames_srgb, classifier), white)
+        if albedo is not None:
+            ita = ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
             with torch.no_grad():
                 scene.tone.fill_(ita)
             face.model.albedo.tone.clamp_(scene.tone, config.tone.ita_range)
-            log.info(f"skin tone starts at ITA {float(scene.tone.detach()):.1f} (the photo's lit "
-                     "skin under the scene's light)")
+            log.info(f"skin tone starts at ITA {float(scene.tone.detach()):.1f} (the skin in the key light "
+                     "under the scene's white level)")
     return SceneLight(illuminant, kept)
