@@ -18,18 +18,19 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
     assert changed == {"preset": "deface", "decouple.face_region": False, "decouple.epsilon": 0.09,
                        "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES,
                        "texture_pyramid.levels": presets.TEXTURE_LEVELS, "completion.enabled": True,
-                       "iterations.stage3_tolerance": presets.STAGE3_TOLERANCE}
+                       "iterations.stage3_tolerance": presets.STAGE3_TOLERANCE, "tone.free_tone": True,
+                       "tone.scene_light_prior": True}
 
 
-def test_deface_tone_is_deface_with_the_skin_tone_work():
-    deface, tone = flatten(presets.get("deface")), flatten(presets.get("deface-tone"))
-    changed = {key: tone[key] for key in deface if deface[key] != tone[key]}
-    assert changed == {"preset": "deface-tone", "tone.free_tone": True, "tone.scene_light_prior": True}
+def test_mean_skin_is_deface_without_the_skin_tone_work():
+    deface, mean_skin = flatten(presets.get("deface")), flatten(presets.get("deface-mean-skin"))
+    changed = {key: mean_skin[key] for key in deface if deface[key] != mean_skin[key]}
+    assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():
     """NextFace's and the paper's numbers must not move with the skin-tone work."""
-    for name in ("default", "paper", "nextface", "nextface-star", "code-images", "code-video", "code-portrait"):
+    for name in ("deface-mean-skin", "paper", "nextface", "nextface-star", "code-images", "code-video", "code-portrait"):
         tone = presets.get(name).tone
         assert not tone.free_tone and not tone.scene_light_prior, name
 

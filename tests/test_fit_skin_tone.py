@@ -60,7 +60,7 @@ def render_scene(ita: float, cct: float, size: int = 96):
     return linear_to_srgb(np.clip(image, 0, 1)), true_landmarks(model, face, camera)
 
 
-def fit_scene(ita: float, cct: float, preset: str = "deface-tone", **changes):
+def fit_scene(ita: float, cct: float, preset: str = "deface", **changes):
     image, landmarks = render_scene(ita, cct)
     config = override(presets.get(preset), **{**SHORT, **changes})
     return run_stages(FitTarget([image], [landmarks], 1.0), config, log=FitLog(quiet=True))

@@ -16,8 +16,9 @@ leaves or a hand casting a shadow over the cheeks (the same person must get the 
 it), a highlight (a larger share of a dark skin's light, so leaving it in lightens dark skins), a clipped
 channel (the red of a light skin under a warm light). :func:`lit_skin_albedo` therefore reads it over the
 whole face, not only the measured regions:
-1. skin: pixels h calls skin whose chromaticity is within ``SKIN_CHROMA`` of the cheeks' and forehead's
-   median (a cast shadow keeps the chromaticity; hair, beard, a white turban, glasses do not);
+1. skin: pixels h calls skin whose colour (log red/green and blue/green, over unclipped channels) is within
+   ``SKIN_CHROMA`` of the cheeks' and forehead's median (a cast shadow keeps it; hair, beard, a white
+   turban, glasses do not);
 2. lit: an upper envelope of the green level over the normals, y = a0 + a . n (the Lambertian key light plus
    ambient, linear in n on the lit side), fitted to the pixels within ``LIT_BAND`` of it and refitted:
    pixels in a cast or attached shadow fall below the band and leave the fit;
@@ -41,8 +42,8 @@ from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import KEY_QUANTILE, front_directions, peak_white
 from deface.models.ita import CLIPPED, MIN_PIXELS, in_tone_boxes, ita_of_srgb, pixel_uvs
 
-SKIN_CHROMA = 0.03
-"""Largest difference in rgb chromaticity (r, g, b over their sum) from the cheeks' skin."""
+SKIN_CHROMA = 0.12
+"""Largest difference in log(red / green) and log(blue / green) from the cheeks' skin (about 12 %)."""
 LIT_BAND = (0.85, 1.25)
 """A pixel whose level lies within this fraction of the key-light envelope's is lit."""
 HIGHLIGHT_COS = 0.87
@@ -108,14 +109,17 @@ def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
 
 
 def _skin_coloured(balanced: np.ndarray, unclipped: np.ndarray, in_boxes: np.ndarray) -> np.ndarray:
-    """[N] bool: pixels whose chromaticity is within SKIN_CHROMA of the cheeks' and forehead's median."""
-    chroma = balanced / np.maximum(balanced.sum(-1, keepdims=True), 1e-6)
+    """[N] bool: pixels whose colour, as log ratios of red and blue to green over the channels that are not
+    clipped, is within SKIN_CHROMA of the cheeks' and forehead's median."""
+    ratios = np.log(np.maximum(balanced, 1e-6)) - np.log(np.maximum(balanced[:, LEVEL_CHANNEL:LEVEL_CHANNEL + 1],
+                                                                  1e-6))
     reference = unclipped.all(-1) & in_boxes & (balanced.sum(-1) > 1e-3)
     if reference.sum() < MIN_PIXELS:
         reference = unclipped.all(-1)
     if not reference.any():
         return np.zeros(len(balanced), dtype=bool)
-    return np.abs(chroma - np.median(chroma[reference], axis=0)).max(-1) < SKIN_CHROMA
+    distance = np.where(unclipped, np.abs(ratios - np.median(ratios[reference], axis=0)), 0.0)
+    return unclipped[:, LEVEL_CHANNEL] & (distance.max(-1) < SKIN_CHROMA)
 
 
 def _key_lit(level: np.ndarray, pixels: SkinPixels, usable: np.ndarray, refits: int = 5) -> np.ndarray:

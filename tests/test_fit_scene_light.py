@@ -1,0 +1,113 @@
+"""The tone's start: the skin's colour in the key light (deface.fit.scene_light.lit_skin_albedo), on synthetic
+skin pixels of known albedo: a Lambertian hemisphere of normals under a key light plus ambient, with the
+things a photo adds: a cast shadow over the cheeks, a specular highlight, a clipped red channel, hair and a
+white turban classified as skin. Each must leave the estimate where the clean skin puts it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from skimage.color import lab2rgb
+
+from deface.fit.scene_light import SkinPixels, lit_skin_albedo
+from deface.io.images import linear_to_srgb
+from deface.models.ita import ita_of_srgb
+from deface.priors.illuminant import planckian_rgb
+
+KEY = np.array([0.45, 0.35, 0.82]) / np.linalg.norm([0.45, 0.35, 0.82])
+AMBIENT = 0.25
+
+
+def skin_albedo(ita: float) -> np.ndarray:
+    angle = np.radians(ita)
+    lab = np.array([50 + 20 * np.sin(angle), 11.0, 20 * np.cos(angle)])
+    return lab2rgb(lab[None, None])[0, 0] ** 2.2
+
+
+def hemisphere(count: int = 6000, seed: int = 0) -> np.ndarray:
+    """Unit normals facing the camera (+z), denser towards it like a face's."""
+    rng = np.random.default_rng(seed)
+    normals = rng.normal(size=(count, 3))
+    normals[:, 2] = np.abs(normals[:, 2]) + 0.3
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+
+
+def photo(albedo: np.ndarray, white: np.ndarray, normals: np.ndarray, *, shadow=None, specular=0.0,
+          exposure=1.0) -> SkinPixels:
+    """Skin pixels lit by the key light (peak white response ``white``) plus ambient."""
+    shading = AMBIENT + (1 - AMBIENT) * np.clip(normals @ KEY, 0, None)
+    if shadow is not None:  # a cast shadow keeps the ambient and a fraction of the key light
+        shading = np.where(shadow, AMBIENT + 0.3 * (shading - AMBIENT), shading)
+    half = (KEY + [0, 0, 1]) / np.linalg.norm(KEY + [0, 0, 1])
+    highlight = specular * np.clip(normals @ half, 0, 1) ** 60
+    linear = exposure * white * (albedo * shading[:, None] + highlight[:, None])
+    in_boxes = np.abs(normals[:, 0]) > 0.35  # "the cheeks"
+    to_camera = np.broadcast_to([0.0, 0.0, 1.0], normals.shape)
+    return SkinPixels(linear_to_srgb(np.clip(linear, 0, 1)), normals, to_camera, in_boxes)
+
+
+def estimated_ita(pixels: SkinPixels, white: np.ndarray) -> float:
+    albedo = lit_skin_albedo(pixels, white)
+    assert albedo is not None
+    return ita_of_srgb(linear_to_srgb(np.clip(albedo, 0, 1))[None])
+
+
+@pytest.mark.parametrize("ita", [-30.0, 10.0, 50.0])
+@pytest.mark.parametrize("cct", [2700.0, 6504.0])
+def test_recovers_the_albedo_under_the_scene_light(ita, cct):
+    """The colour exactly; the level is the skin at the key quantile of the lit pixels, a surface within
+    about 25 degrees of the light (the level the scene-light term holds the key light to), so 85-100 %."""
+    white = 0.9 * planckian_rgb(cct)
+    ratio = lit_skin_albedo(photo(skin_albedo(ita), white, hemisphere()), white) / skin_albedo(ita)
+    assert ratio == pytest.approx(np.full(3, ratio.mean()), rel=0.02)
+    assert 0.85 <= ratio.mean() <= 1.0
+
+
+def test_a_cast_shadow_over_the_cheeks_leaves_the_start_alone():
+    white, normals = np.ones(3), hemisphere()
+    clean = estimated_ita(photo(skin_albedo(10.0), white, normals), white)
+    cheeks = photo(skin_albedo(10.0), white, normals).in_boxes
+    shadow = cheeks & (np.random.default_rng(1).random(len(normals)) < 0.8)  # most of the measured skin
+    shadowed_photo = photo(skin_albedo(10.0), white, normals, shadow=shadow)
+    assert estimated_ita(shadowed_photo, white) == pytest.approx(clean, abs=2.0)
+    # the cheeks' own lit pixels (the previous start) move by much more
+    cheeks_only = SkinPixels(*(getattr(shadowed_photo, f)[cheeks] for f in ("srgb", "normals", "to_camera",
+                                                                             "in_boxes")))
+    assert abs(estimated_ita(cheeks_only, white) - clean) > 5.0
+
+
+def test_a_highlight_does_not_lighten_dark_skin():
+    white, normals = np.ones(3), hemisphere()
+    clean = estimated_ita(photo(skin_albedo(-30.0), white, normals), white)
+    shiny = photo(skin_albedo(-30.0), white, normals, specular=0.25)
+    assert np.median(shiny.srgb[:, 2]) > 0  # the highlight is there
+    assert estimated_ita(shiny, white) == pytest.approx(clean, abs=1.5)
+
+
+def test_a_clipped_red_channel_keeps_the_colour():
+    white, normals = np.ones(3), hemisphere()
+    albedo = skin_albedo(50.0)
+    clean = estimated_ita(photo(albedo, white, normals), white)
+    bright = photo(albedo, white, normals, exposure=2.2)
+    assert (bright.srgb[:, 0] >= 0.98).mean() > 0.2  # much of the lit skin is clipped in red
+    albedo_bright = lit_skin_albedo(bright, white)
+    ratio = albedo_bright / lit_skin_albedo(photo(albedo, white, normals), white)
+    assert ratio == pytest.approx(np.full(3, 2.2), rel=0.05)  # the exposure, in every channel alike
+    assert estimated_ita(photo(albedo, 1.5 * white, normals, exposure=1.0), 1.5 * white) == pytest.approx(clean)
+
+
+def test_hair_and_a_white_turban_taken_for_skin_are_left_out():
+    white, normals = np.ones(3), hemisphere()
+    skin = photo(skin_albedo(-10.0), white, normals)
+    rng = np.random.default_rng(2)
+    others = rng.random(len(normals))
+    srgb = skin.srgb.copy()
+    srgb[others < 0.15] = 0.93  # a white turban
+    srgb[(others >= 0.15) & (others < 0.3)] = [0.12, 0.1, 0.09]  # dark hair
+    mixed = SkinPixels(srgb, skin.normals, skin.to_camera, skin.in_boxes)
+    assert estimated_ita(mixed, white) == pytest.approx(estimated_ita(skin, white), abs=1.5)
+
+
+def test_too_little_skin_gives_no_start():
+    normals = hemisphere(8)
+    assert lit_skin_albedo(photo(skin_albedo(10.0), np.ones(3), normals), np.ones(3)) is None
