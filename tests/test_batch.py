@@ -114,6 +114,16 @@ def test_settings_differences_name_the_preset_and_fields(tmp_path):
     assert other[0] == "preset 'fast' (this run: 'deface')" and len(other) > 1
 
 
+def test_a_bfm_fit_with_its_tone_turned_off_is_the_same_settings(tmp_path):
+    """BFM has no tone axis, so its fits record tone.free_tone off; a rerun asking for the default is the same."""
+    bfm = override(presets.get("default"), model="bfm")
+    _finished(tmp_path / "a", override(bfm, **{"tone.free_tone": False}))
+    assert settings_differences(tmp_path / "a" / "params.json", bfm) == []
+    ict = presets.get("default")  # an ICT fit with the tone off would be other settings
+    _finished(tmp_path / "b", override(ict, **{"tone.free_tone": False}))
+    assert settings_differences(tmp_path / "b" / "params.json", ict) != []
+
+
 def test_resuming_with_other_settings_is_refused_in_one_line(two_photos, tmp_path, monkeypatch):
     out = tmp_path / "out"
     _finished(out / "a", presets.get("fast"))

@@ -30,7 +30,8 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():
     """NextFace's and the paper's numbers must not move with the skin-tone work."""
-    for name in ("deface-mean-skin", "paper", "nextface", "nextface-star", "code-images", "code-video", "code-portrait"):
+    for name in ("deface-mean-skin", "paper", "nextface", "nextface-star", "code-images", "code-video",
+                 "code-portrait"):
         tone = presets.get(name).tone
         assert not tone.free_tone and not tone.scene_light_prior, name
 

@@ -66,3 +66,11 @@ def test_tone_is_projected_into_the_range():
     assert float(tone) == AXIS.max_ita
     AXIS.clamp_(tone, (-50.0, 72.0))
     assert float(tone) == 72.0
+
+
+def test_the_registry_knows_which_models_have_a_tone_axis(shared):
+    from deface.models import load_face_model
+    from deface.models.registry import TONE_AXIS
+
+    assert TONE_AXIS["ict"] and load_face_model("ict").albedo.tone is not None
+    assert not TONE_AXIS["bfm"]  # AlbedoMM (docs/bfm.md); its files are not here to load

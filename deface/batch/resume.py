@@ -13,6 +13,7 @@ from deface.batch.record import latest_states, read_records
 from deface.batch.task import finished_params
 from deface.fit.config import FitConfig, differences, from_dict
 from deface.io.inputs import InputItem
+from deface.models.registry import supports_free_tone
 
 # Config fields that do not change what is fitted: torch threads (a batch worker runs with 1).
 IGNORED_SETTINGS = ("threads",)
@@ -91,6 +92,7 @@ def settings_differences(params_file: Path, config: FitConfig) -> list[str]:
         made = from_dict(recorded["config"])
     except (ValueError, TypeError) as error:
         return [f"a config this version cannot read ({str(error).splitlines()[0]})"]
+    config = supports_free_tone(config)  # what the fits recorded for a model without a tone axis
     changed = []
     if made.preset != config.preset:
         changed.append(f"preset '{made.preset}' (this run: '{config.preset}')")

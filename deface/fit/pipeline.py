@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from deface.fit.config import FitConfig, override
+from deface.fit.config import FitConfig
 from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
 from deface.fit.output import FinishedTextures, FitOutput, RunRecord
@@ -30,7 +30,7 @@ from deface.fit.target import FitTarget, scale_landmarks, working_frames
 from deface.fit.texels import complete_textures, seen_texels, texture_confidence
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
-from deface.models.registry import load_face_model
+from deface.models.registry import load_face_model, supports_free_tone
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
 from deface.priors.illuminant import estimate_illuminant
@@ -170,10 +170,10 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
 
 def _supported_tone(model, config: FitConfig, log: FitLog) -> FitConfig:
     """``config`` without ``tone.free_tone`` for a model with no tone axis (BFM's AlbedoMM), said in the log."""
-    if not config.tone.free_tone or model.albedo.tone is not None:
-        return config
-    log.info(f"the {model.name} albedo model has no skin-tone axis: the tone is not free (docs/skin-tone.md)")
-    return override(config, **{"tone.free_tone": False})
+    supported = supports_free_tone(config)
+    if supported is not config:
+        log.info(f"the {model.name} albedo model has no skin-tone axis: the tone is not free (docs/skin-tone.md)")
+    return supported
 
 
 def _initial_tone(model, config: FitConfig) -> float:
