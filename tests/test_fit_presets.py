@@ -19,7 +19,7 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
                        "lights.num_lights": 3, "decouple.fourier_frequencies": presets.FOURIER_OCTAVES,
                        "texture_pyramid.levels": presets.TEXTURE_LEVELS, "completion.enabled": True,
                        "iterations.stage3_tolerance": presets.STAGE3_TOLERANCE, "tone.free_tone": True,
-                       "tone.scene_light_prior": True}
+                       "tone.scene_light_prior": True, "decouple.clipped_as_bound": True}
 
 
 def test_mean_skin_is_deface_without_the_skin_tone_work():

@@ -79,6 +79,24 @@ def test_photometric_loss_both_forms_by_hand():
     assert half.item() == pytest.approx(0.5)
 
 
+def test_a_clipped_channel_is_a_lower_bound():
+    image = torch.tensor([[[1.0, 0.5, 0.2]]])
+    clipped = torch.tensor([[[True, False, False]]])
+    ones = torch.ones(1, 1)
+    above = torch.tensor([[[1.4, 0.5, 0.2]]], requires_grad=True)  # brighter than the clip: no error
+    loss = photometric_loss(above, image, ones, ones, blur=False, form="paper", clipped=clipped)
+    loss.backward()
+    assert loss.item() == 0.0 and above.grad.abs().sum().item() == 0.0
+    below = torch.tensor([[[0.7, 0.5, 0.2]]])  # darker than the clip: an error as before
+    unbounded = photometric_loss(below, image, ones, ones, blur=False, form="paper")
+    assert photometric_loss(below, image, ones, ones, blur=False, form="paper", clipped=clipped) == unbounded
+    assert unbounded.item() == pytest.approx(0.1)
+    # unclipped channels keep both signs
+    over = torch.tensor([[[1.0, 0.8, 0.2]]])
+    assert photometric_loss(over, image, ones, ones, blur=False, form="paper", clipped=clipped).item() == \
+        pytest.approx(0.1)
+
+
 def test_blur_kernel_and_effect_on_the_loss():
     kernel = gaussian_kernel3(1.0)
     assert kernel.sum().item() == pytest.approx(1.0)

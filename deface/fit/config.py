@@ -51,6 +51,9 @@ class DecoupleConfig:
     """ACE area over the render mask (authors' code) or over all pixels (paper's formula)."""
     loss_form: Literal["code", "paper"] = "code"
     """Formulas of L_area / L_bin / L_seg / L_pho as in the authors' code or as printed in the paper."""
+    clipped_as_bound: bool = False
+    """L_pho takes a clipped channel of the photo (sRGB >= 0.98) as a lower bound, not a value: a render above
+    it costs nothing (deface/losses/photometric.py). Off: the paper's loss."""
     hidden: tuple[int, ...] = (16, 64, 64)
     """Hidden widths of f (the authors' 3->16->64->64->n)."""
     fourier_frequencies: int = 0

@@ -97,7 +97,8 @@ def _deface() -> FitConfig:
     return FitConfig(
         preset="deface",
         lights=LightConfig(num_lights=3),
-        decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES),
+        decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES,
+                                clipped_as_bound=True),
         iterations=Iterations(stage3_tolerance=STAGE3_TOLERANCE),
         texture_pyramid=PyramidConfig(levels=TEXTURE_LEVELS),
         completion=CompletionConfig(enabled=True),

@@ -214,7 +214,8 @@ class StageContext:
     def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
         return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
                                 rendered.coverage, blur=self.config.render.render_blur,
-                                form=self.config.decouple.loss_form)
+                                form=self.config.decouple.loss_form,
+                                clipped=self.target.clipped[frame] if self.config.decouple.clipped_as_bound else None)
 
 
 class LossTerms:

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from deface.fit.config import FitConfig
-from deface.io.images import resize_max, srgb_to_linear
+from deface.io.images import CLIPPED, resize_max, srgb_to_linear
 from deface.landmarks.detect import Landmarks
 from deface.render.renderer import RenderConfig
 
@@ -25,10 +25,13 @@ class FitTarget:
     scale: float  # working / original resolution
     kept_frames: list[int] | None = None  # positions of these frames among the input frames (None: all)
     images: torch.Tensor = field(init=False)  # [T, H, W, 3] linear RGB
+    clipped: torch.Tensor = field(init=False)  # [T, H, W, 3] bool: channels at the encoding's top (CLIPPED)
 
     def __post_init__(self) -> None:
         images = torch.as_tensor(np.stack([srgb_to_linear(f) for f in self.frames_srgb]), dtype=torch.float32)
         object.__setattr__(self, "images", images)
+        clipped = torch.as_tensor(np.stack([f >= CLIPPED for f in self.frames_srgb]))
+        object.__setattr__(self, "clipped", clipped)
 
     @property
     def num_frames(self) -> int:

@@ -15,6 +15,8 @@ from PIL import Image, ImageOps, UnidentifiedImageError
 
 GAMMA = 2.2  # NextFace's display gamma
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 / sRGB luminance of linear RGB
+CLIPPED = 0.98
+"""sRGB value at which a channel counts as clipped (the sensor or the encoding's top)."""
 
 
 # Larger photos are shrunk while they are decoded (JPEG: at a fraction of the full size) so that an

@@ -44,8 +44,13 @@ def photometric_loss(
     coverage: torch.Tensor,
     blur: bool = True,
     form: str = "code",
+    clipped: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """L_pho (scalar). I_R and I_in [..., H, W, 3]; face_region M_o = M_R g and coverage M_R [..., H, W]."""
+    """L_pho (scalar). I_R and I_in [..., H, W, 3]; face_region M_o = M_R g and coverage M_R [..., H, W].
+
+    ``clipped`` [..., H, W, 3] bool marks channels of I_in at the encoding's top: they only say the radiance
+    reached it, so a render above them is no error (a lower bound; without it a light skin's clipped red
+    under a warm light reads as less red skin and lightens the tone by ~15 degrees of ITA)."""
     if rendered_face.shape != image.shape or image.shape[-1] != 3:
         raise ValueError(
             f"rendered {tuple(rendered_face.shape)} and image {tuple(image.shape)} must be [..., H, W, 3]"
@@ -57,9 +62,11 @@ def photometric_loss(
         )
     render = blur3(rendered_face) if blur else rendered_face
     weight = face_region[..., None]
-    output = render * weight + image * (1.0 - weight)
+    difference = render * weight + image * (1.0 - weight) - image
+    if clipped is not None:
+        difference = torch.where(clipped & (difference > 0), torch.zeros_like(difference), difference)
     if form == "paper":
-        return (output - image).abs().mean()
+        return difference.abs().mean()
     if form == "code":
-        return (2.0 * coverage[..., None] * (output - image).abs()).mean()
+        return (2.0 * coverage[..., None] * difference.abs()).mean()
     raise ValueError(f"unknown photometric form {form!r}; choose one of {FORMS}")

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from skimage.color import rgb2lab
 
-from deface.io.images import GAMMA, LUMINANCE
+from deface.io.images import CLIPPED, GAMMA, LUMINANCE
 
 # (u0, u1, y0, y1) with y = 1 - v measured downward from the texture image's top (ICT layout).
 TONE_BOXES = {
@@ -30,7 +30,6 @@ TONE_BOXES = {
     "right_cheek": (0.658, 0.805, 0.42, 0.547),
     "forehead": (0.352, 0.648, 0.137, 0.205),
 }
-CLIPPED = 0.98  # sRGB value at which a channel counts as clipped
 SHADOW_FRACTION = 0.5  # pixels darker than this fraction of the region's 90th-percentile luminance are shadow
 MIN_PIXELS = 12  # fewer usable pixels than this: no photo ITA
 
