@@ -25,7 +25,8 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
 def test_mean_skin_is_deface_without_the_skin_tone_work():
     deface, mean_skin = flatten(presets.get("deface")), flatten(presets.get("deface-mean-skin"))
     changed = {key: mean_skin[key] for key in deface if deface[key] != mean_skin[key]}
-    assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False}
+    assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False,
+                       "decouple.clipped_as_bound": False}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():

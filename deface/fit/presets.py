@@ -25,8 +25,10 @@
   It keeps the person's skin tone (``tone``, docs/skin-tone.md): the albedo's tone is free along a
   flat-prior tone axis, starts from the skin in the key light, and the lights are held to the scene's
   illuminant. Without it the lights absorb every skin's tone and all textures come out alike (regression
-  slope of texture ITA on photo ITA 0.08).
-- ``deface-mean-skin``: ``deface`` before it kept the tone: the model's mean skin with free lights, so every
+  slope of texture ITA on photo ITA 0.08). L_pho takes the photo's clipped channels as lower bounds
+  (``decouple.clipped_as_bound``): a clipped red is not less red skin.
+- ``deface-mean-skin``: ``deface`` before it kept the tone (the earlier default exactly, with L_pho's clipped
+  channels as values again): the model's mean skin with free lights, so every
   person gets nearly the same pale texture. Its texture transfer between a shadowed and a clean photo of one
   person is higher (both fits give the same skin whatever the person's), so it stays for comparison with
   earlier figures (BENCHMARKS.md), not for use.
@@ -107,7 +109,7 @@ def _deface() -> FitConfig:
 
 
 def _deface_mean_skin() -> FitConfig:
-    return override(_deface(), preset="deface-mean-skin", tone=ToneConfig())
+    return override(_deface(), preset="deface-mean-skin", tone=ToneConfig(), **{"decouple.clipped_as_bound": False})
 
 
 def _fast() -> FitConfig:
