@@ -184,7 +184,10 @@ class ToneConfig:
     exposure_sigma: float = 0.1
     """Allowed log-ratio spread of the brightest light's white level around the estimate's."""
     learning_rate: float = 0.3
-    """Adam step of the tone (degrees of ITA)."""
+    """Adam step of the tone in stage 2 (degrees of ITA); 0: the tone stays where it starts, the skin in the key
+    light under the scene's white level (deface/fit/scene_light.py). ``deface`` uses 0: the tone trades freely
+    against the key light's level, and on the renders of known albedo stage 2 moved good starts by up to 23
+    degrees (a brim's shadow taken for darker skin, a warm light's clipped red for lighter; BENCHMARKS.md)."""
     ita_range: tuple[float, float] = (-50.0, 72.0)
     """Where the tone's flat prior is (degrees of ITA): human skin, from the darkest skins measured (about -50;
     Del Bino et al. 2006's dark group is below -30) to the lightest (about 70; their very light group is above

@@ -23,8 +23,8 @@
   (docs/textures.md): per-texel maps fill with colour noise where the photo does not resolve texels.
   Stage 3 stops early once its loss has settled (``Iterations.stage3_tolerance``).
   It keeps the person's skin tone (``tone``, docs/skin-tone.md): the albedo's tone is free along a
-  flat-prior tone axis, starts from the skin in the key light, and the lights are held to the scene's
-  illuminant. Without it the lights absorb every skin's tone and all textures come out alike (regression
+  flat-prior tone axis, set from the skin in the key light (stage 2 keeps it), and the lights are held to
+  the scene's illuminant. Without it the lights absorb every skin's tone and all textures come out alike (regression
   slope of texture ITA on photo ITA 0.08). L_pho takes the photo's clipped channels as lower bounds
   (``decouple.clipped_as_bound``): a clipped red is not less red skin.
 - ``deface-mean-skin``: ``deface`` before it kept the tone (the earlier default exactly, with L_pho's clipped
@@ -91,6 +91,9 @@ FOURIER_OCTAVES = 4
 # 256² photo the last ~80 of 200 steps lowered the loss ~1 % in all; BENCHMARKS.md "Speed").
 STAGE3_TOLERANCE = 0.005
 
+# The tone stays at its start in `deface` (ToneConfig.learning_rate; BENCHMARKS.md "Skin tone").
+TONE_STEP = 0.0
+
 # Levels of the stage-3 texture pyramid in the default preset (deface/texture/pyramid.py, BENCHMARKS.md).
 TEXTURE_LEVELS = 5
 
@@ -104,7 +107,7 @@ def _deface() -> FitConfig:
         iterations=Iterations(stage3_tolerance=STAGE3_TOLERANCE),
         texture_pyramid=PyramidConfig(levels=TEXTURE_LEVELS),
         completion=CompletionConfig(enabled=True),
-        tone=ToneConfig(free_tone=True, scene_light_prior=True),
+        tone=ToneConfig(free_tone=True, scene_light_prior=True, learning_rate=TONE_STEP),
     )
 
 

@@ -69,7 +69,7 @@ def _parameter_groups(context: StageContext) -> list[dict]:
         {"params": [scene.expression], "lr": rates.expression},
         {"params": [scene.rotation, scene.translation], "lr": rates.pose},
     ]
-    if context.config.tone.free_tone:
+    if context.config.tone.free_tone and context.config.tone.learning_rate > 0:
         groups.append({"params": [scene.tone], "lr": context.config.tone.learning_rate})
     if context.decoupling.light_field is not None:
         groups.append({"params": context.decoupling.light_field.parameters(), "lr": rates.light_masks})
