@@ -156,7 +156,7 @@ def test_presets_command_shows_each_preset_and_its_differences():
     for name in presets.PRESETS:
         assert f"{name}" in result.output and presets.DESCRIPTIONS[name] in result.output, name
     assert "decouple.epsilon = 0.09  (paper: 0.17)" in result.output  # the default against the paper
-    assert "tone.free_tone = true  (the default: false)" in result.output
+    assert "tone.free_tone = false  (the default: true)" in result.output  # deface-mean-skin
     changed = differences(presets.get("fast"), presets.get("default"))
     assert set(changed) == {"preset", "resolution", "texture_size", "render.shadow_rays", "iterations.stage1",
                             "iterations.stage2", "iterations.stage3", "decouple.ace_iteration"}

@@ -50,7 +50,10 @@ def render_scene(ita: float, cct: float, size: int = 96):
     textures = Textures((pattern * skin).clamp(0, 1).float(), torch.full((128, 128, 3), 0.04),
                         torch.full((128, 128, 1), 0.45))
     colour = torch.as_tensor(planckian_rgb(cct), dtype=torch.float32)
-    light = directional_sh((0.3, 0.4, 0.85), strength=1.0, ambient=0.4) * colour
+    light = directional_sh((0.3, 0.4, 0.85), strength=1.0, ambient=0.4)
+    # exposed so that a white surface facing the light reads white (W = 1): the test is about tone, not about
+    # guessing the exposure (tests/test_priors_illuminant.py)
+    light = light / float(peak_white(light, front_directions())[0].mean()) * colour
     with torch.no_grad():
         output = renderer.shade(face, camera, renderer.rasterize(face, camera), textures, light,
                                 renderer.shadow_transfer(face))
