@@ -111,3 +111,11 @@ def test_hair_and_a_white_turban_taken_for_skin_are_left_out():
 def test_too_little_skin_gives_no_start():
     normals = hemisphere(8)
     assert lit_skin_albedo(photo(skin_albedo(10.0), np.ones(3), normals), np.ones(3)) is None
+
+
+def test_a_grayscale_photo_keeps_the_model_tone():
+    from deface.fit.scene_light import grayscale
+
+    skin = photo(skin_albedo(10.0), np.ones(3), hemisphere())
+    grey = np.repeat(skin.srgb.mean(-1, keepdims=True), 3, axis=-1)
+    assert grayscale(grey) and not grayscale(skin.srgb)

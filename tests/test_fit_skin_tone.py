@@ -123,3 +123,15 @@ def test_params_record_the_tone_and_the_scene_light(neutral_fits, tmp_path):
     assert params["skin_tone"]["free"] and abs(params["skin_tone"]["ita"] - 50.0) < 15
     assert params["illuminant"]["source"] == "grey world"
     assert params["illuminant"]["cct"] == pytest.approx(6504, rel=0.05)
+
+
+def test_a_grayscale_photo_keeps_the_model_mean_tone_and_says_so(shared):
+    from deface.fit.pipeline import prepare
+
+    image, landmarks = render_scene(0.0, 6504.0)
+    grey = np.repeat(image.mean(-1, keepdims=True), 3, axis=-1)
+    log = FitLog(quiet=True)
+    context, _ = prepare(FitTarget([grey], [landmarks], 1.0), override(presets.get("deface"), **SHORT), log=log)
+    model_tone = context.model.albedo.tone.reference_ita
+    assert float(context.face.scene.tone) == pytest.approx(model_tone)
+    assert any("grayscale" in note for note in log.notes)

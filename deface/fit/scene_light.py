@@ -168,12 +168,30 @@ def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant
     regions = tone_regions(face, classifier)
     kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= 12 else None
     if config.tone.free_tone:
-        albedo = lit_skin_albedo(skin_pixels(face, frames_srgb, classifier), white)
-        if albedo is not None:
-            ita = ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
-            with torch.no_grad():
-                scene.tone.fill_(ita)
-            face.model.albedo.tone.clamp_(scene.tone, config.tone.ita_range)
-            log.info(f"skin tone starts at ITA {float(scene.tone.detach()):.1f} (the skin in the key light "
-                     "under the scene's white level)")
+        _start_tone(face, skin_pixels(face, frames_srgb, classifier), white, config, log)
     return SceneLight(illuminant, kept)
+
+
+def _start_tone(face, pixels: SkinPixels, white: np.ndarray, config, log) -> None:
+    """Set ``face.scene.tone`` from the skin in the key light, or say in the log why it keeps the model's."""
+    keeps = f"the tone stays at the model's mean skin (ITA {float(face.scene.tone.detach()):.1f})"
+    if grayscale(pixels.srgb):
+        log.info(f"a grayscale photo does not show skin tone: {keeps}")
+        return
+    albedo = lit_skin_albedo(pixels, white)
+    if albedo is None:
+        log.info(f"too little lit skin to read the skin tone from: {keeps}")
+        return
+    ita = ita_of_srgb(linear_to_srgb(np.clip(albedo, 0.0, 1.0))[None])
+    with torch.no_grad():
+        face.scene.tone.fill_(ita)
+    face.model.albedo.tone.clamp_(face.scene.tone, config.tone.ita_range)
+    log.info(f"skin tone starts at ITA {float(face.scene.tone.detach()):.1f} (the skin in the key light under "
+             "the scene's white level)")
+
+
+def grayscale(srgb: np.ndarray, tolerance: float = 1.5 / 255) -> bool:
+    """Whether colours [N, 3] are grey (all channels equal within ``tolerance`` on 99 % of them)."""
+    if len(srgb) == 0:
+        return False
+    return float(np.mean(np.ptp(srgb, axis=-1) <= tolerance)) >= 0.99
