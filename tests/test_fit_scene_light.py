@@ -119,3 +119,16 @@ def test_a_grayscale_photo_keeps_the_model_tone():
     skin = photo(skin_albedo(10.0), np.ones(3), hemisphere())
     grey = np.repeat(skin.srgb.mean(-1, keepdims=True), 3, axis=-1)
     assert grayscale(grey) and not grayscale(skin.srgb)
+
+
+def test_red_clipped_on_all_the_lit_skin_takes_the_colour_from_the_rest():
+    """An overexposed photo of a red-brown skin: the red of every key-lit pixel is clipped; the colour comes from
+    the skin whose red is not (the ratio does not depend on the shading), the level from green."""
+    white, normals = np.ones(3), hemisphere()
+    albedo = np.array([0.25, 0.1, 0.05])
+    over = photo(albedo, white, normals, exposure=9.0)  # a surface facing the light: green 0.9, red 2.25
+    green = over.srgb[:, 1] ** 2.2
+    lit = green >= 0.5 * np.quantile(green, 0.9)  # the candidates for the key light's envelope
+    assert (over.srgb[lit, 0] >= 0.98).mean() > 0.99
+    ratio = lit_skin_albedo(over, white) / albedo
+    assert ratio == pytest.approx(np.full(3, ratio.mean()), rel=0.05)  # the colour, in every channel alike

@@ -101,11 +101,22 @@ def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
     lit = _key_lit(level, pixels, usable)
     if lit.sum() < MIN_PIXELS:
         return None
-    ratios = [np.median(balanced[lit & unclipped[:, c], c] / level[lit & unclipped[:, c]])
-              if (lit & unclipped[:, c]).sum() >= MIN_PIXELS else np.nan for c in range(3)]
+    ratios = [_channel_ratio(balanced, level, unclipped[:, c], c, (lit, usable)) for c in range(3)]
     if not np.all(np.isfinite(ratios)):
         return None
     return np.quantile(level[lit], KEY_QUANTILE) * np.asarray(ratios)
+
+
+def _channel_ratio(balanced: np.ndarray, level: np.ndarray, unclipped: np.ndarray, channel: int,
+                   pools: tuple[np.ndarray, ...]) -> float:
+    """Median ratio of ``channel`` to the level over the first pool with enough pixels where it is not clipped:
+    the lit skin, else all the skin (an overexposed photo clips a skin's red wherever the key light falls; the
+    ratio does not depend on the shading)."""
+    for pool in pools:
+        chosen = pool & unclipped
+        if chosen.sum() >= MIN_PIXELS:
+            return float(np.median(balanced[chosen, channel] / level[chosen]))
+    return float("nan")
 
 
 def _skin_coloured(balanced: np.ndarray, unclipped: np.ndarray, in_boxes: np.ndarray) -> np.ndarray:
