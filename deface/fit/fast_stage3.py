@@ -211,15 +211,20 @@ if njit is not None:
         return total
 
     @njit(cache=True)
+    def _mask_total(mask):
+        """Sum of a [H, W] mask, at least 1e-8 (the normaliser of the mask-weighted means)."""
+        total = 0.0
+        for i in range(mask.shape[0]):
+            for j in range(mask.shape[1]):
+                total += mask[i, j]
+        return max(total, 1e-8)
+
+    @njit(cache=True)
     def _palette_term(diffuse, palette, mask, weight, grad):
         """weight x GP (squared distance to the nearest palette colour, mask-weighted mean) and its gradient
         added into grad; distances in the reference's expanded form ||x||^2 - 2 x.c + ||c||^2."""
         height, width, channels = diffuse.shape
-        weight_sum = 0.0
-        for i in range(height):
-            for j in range(width):
-                weight_sum += mask[i, j]
-        weight_sum = max(weight_sum, 1e-8)
+        weight_sum = _mask_total(mask)
         norms = np.zeros(palette.shape[0])
         for k in range(palette.shape[0]):
             for c in range(channels):
@@ -254,11 +259,7 @@ if njit is not None:
         """LP = sum_p w(p) d(p) / sum_p w(p), d(p) = mean over channels and the (2r+1)^2 - 1 offsets o of
         |D(p) - D(clamp(p + o))| (replicate padding); its gradient to D into grad. Serial, pixel order."""
         height, width, channels = difference.shape
-        weight_sum = 0.0
-        for i in range(height):
-            for j in range(width):
-                weight_sum += mask[i, j]
-        weight_sum = max(weight_sum, 1e-8)
+        weight_sum = _mask_total(mask)
         count = ((2 * radius + 1) ** 2 - 1) * channels
         total = 0.0
         for i in range(height):
