@@ -11,9 +11,8 @@ from pathlib import Path
 
 from deface.batch.record import latest_states, read_records
 from deface.batch.task import finished_params
-from deface.fit.config import FitConfig, differences, from_dict
+from deface.fit.config import FitConfig, differences, from_dict, supports_free_tone
 from deface.io.inputs import InputItem
-from deface.models.registry import supports_free_tone
 
 # Config fields that do not change what is fitted: torch threads (a batch worker runs with 1).
 IGNORED_SETTINGS = ("threads",)

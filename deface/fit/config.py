@@ -13,6 +13,7 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from types import UnionType
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
+from deface.models.registry import TONE_AXIS
 from deface.priors.illuminant import IlluminantConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
@@ -519,3 +520,11 @@ def _set_path(config: Any, parts: list[str], value: Any) -> Any:
     if len(parts) == 1:
         return replace(config, **{parts[0]: value})
     return replace(config, **{parts[0]: _set_path(getattr(config, parts[0]), parts[1:], value)})
+
+
+def supports_free_tone(config: FitConfig) -> FitConfig:
+    """``config`` as a fit with its model runs it: ``tone.free_tone`` off for a model without a tone axis
+    (``deface.models.registry.TONE_AXIS``)."""
+    if not config.tone.free_tone or TONE_AXIS.get(config.model, True):
+        return config
+    return override(config, **{"tone.free_tone": False})

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from deface.fit.config import FitConfig
+from deface.fit.config import FitConfig, supports_free_tone
 from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
 from deface.fit.output import FinishedTextures, FitOutput, RunRecord
@@ -30,7 +30,7 @@ from deface.fit.target import FitTarget, scale_landmarks, working_frames
 from deface.fit.texels import complete_textures, seen_texels, texture_confidence
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
-from deface.models.registry import load_face_model, supports_free_tone
+from deface.models.registry import load_face_model
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
 from deface.priors.illuminant import estimate_illuminant

@@ -71,21 +71,26 @@ def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Ten
 
 
 @torch.no_grad()
-def skin_pixels(face, frames_srgb: list[np.ndarray], classifier) -> SkinPixels:
-    """The skin pixels of ``face`` (a :class:`~deface.fit.state.PosedFace`) that h (``classifier``) keeps."""
-    parts = []
+def face_skin(face, frames_srgb: list[np.ndarray], classifier) -> tuple[list[np.ndarray], SkinPixels]:
+    """What h (``classifier``, T x [H, W]) calls skin on ``face`` (a :class:`~deface.fit.state.PosedFace`),
+    from one ray cast per frame: per frame the [H, W] bool pixels of the cheeks and forehead, and the skin
+    pixels of the whole face."""
+    regions, parts = [], []
     for frame, h in enumerate(classifier):
         geometry, fragments = face.fragments(frame)
-        mesh, covered = geometry.mesh, fragments.covered
-        skin = h.numpy().reshape(-1)[covered.numpy()] > 0.5
+        mesh, covered = geometry.mesh, fragments.covered.numpy()
+        skin_image = (fragments.mask.numpy() > 0) & (h.numpy() > 0.5)
+        boxes_image = in_tone_boxes(pixel_uvs(fragments, mesh))
+        regions.append(skin_image & boxes_image)
+        skin = skin_image.reshape(-1)[covered]
         corners = mesh.vertices[mesh.triangles[fragments.covered_triangles]]  # [N, 3, 3]
         points = (fragments.covered_barycentrics[..., None] * corners).sum(1)
         normals = torch.nn.functional.normalize(mesh.face_normals()[fragments.covered_triangles], dim=-1)
         to_camera = torch.nn.functional.normalize(geometry.camera.center_in_model() - points, dim=-1)
-        uv = pixel_uvs(fragments, mesh).reshape(-1, 2)[covered.numpy()]
-        srgb = frames_srgb[frame].reshape(-1, 3)[covered.numpy()]
-        parts.append((srgb[skin], normals.numpy()[skin], to_camera.numpy()[skin], in_tone_boxes(uv)[skin]))
-    return SkinPixels(*(np.concatenate([p[i] for p in parts]) for i in range(4)))
+        srgb = frames_srgb[frame].reshape(-1, 3)[covered]
+        parts.append((srgb[skin], normals.numpy()[skin], to_camera.numpy()[skin],
+                      boxes_image.reshape(-1)[covered][skin]))
+    return regions, SkinPixels(*(np.concatenate([p[i] for p in parts]) for i in range(4)))
 
 
 def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
@@ -157,29 +162,16 @@ def _highlight(direction: np.ndarray, pixels: SkinPixels) -> np.ndarray:
     return (pixels.normals * half).sum(-1) >= HIGHLIGHT_COS
 
 
-@torch.no_grad()
-def tone_regions(face, classifier) -> list[np.ndarray]:
-    """Per frame [H, W] bool: pixels of ``face`` (a :class:`~deface.fit.state.PosedFace`) showing the cheeks
-    and forehead that h (``classifier``, T x [H, W]) calls skin."""
-    regions = []
-    for frame, h in enumerate(classifier):
-        geometry, fragments = face.fragments(frame)
-        skin = h.numpy() > 0.5
-        region = (fragments.mask.numpy() > 0) & skin & in_tone_boxes(pixel_uvs(fragments, geometry.mesh))
-        regions.append(region)
-    return regions
-
-
 def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant, config, log) -> SceneLight:
     """Scale ``face.scene``'s initial lights to the scene's white level and start the tone at the photo's (in
     place); returns the scene light the scene-light terms hold the fit to."""
     white, scene = illuminant.white, face.scene
     with torch.no_grad():
         scene.lights.copy_(lights_scaled_to_white(scene.lights, white))
-    regions = tone_regions(face, classifier)
-    kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= 12 else None
+    regions, pixels = face_skin(face, frames_srgb, classifier)
+    kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= MIN_PIXELS else None
     if config.tone.free_tone:
-        _start_tone(face, skin_pixels(face, frames_srgb, classifier), white, config, log)
+        _start_tone(face, pixels, white, config, log)
     return SceneLight(illuminant, kept)
 
 

@@ -210,16 +210,6 @@ TONE_AXIS = {"ict": True, "bfm": False}
 Known without loading the model, so a batch can compare a rerun's settings with the fits' own."""
 
 
-def supports_free_tone(config):
-    """``config`` (a FitConfig) as a fit with its model runs it: ``tone.free_tone`` off for a model without a
-    tone axis."""
-    from deface.fit.config import override
-
-    if not config.tone.free_tone or TONE_AXIS.get(config.model, True):
-        return config
-    return override(config, **{"tone.free_tone": False})
-
-
 def load_face_model(name: str, models_dir: str | os.PathLike | None = None) -> FaceModel:
     """The face model called ``name`` ("ict" or "bfm"), with its albedo model."""
     if name == "ict":
