@@ -30,6 +30,7 @@ class Decoupling(torch.nn.Module):
         )
         self.region_field = FaceRegionField() if config.face_region else None
         self.register_buffer("coords", video_coordinates(num_frames, height, width))  # [T, H, W, 3]
+        self._other_sizes: dict[tuple[int, int], torch.Tensor] = {}  # stage 2's half-size level
         self._kept = list(range(num_lights))
 
     @property
@@ -45,14 +46,24 @@ class Decoupling(torch.nn.Module):
         # f only where the face is rendered: M_N = M_R * f is zero elsewhere, and this halves the cost.
         covered = coverage > 0
         masks = coverage.new_zeros((*coverage.shape, len(self._kept)))  # [H, W, K_kept]
-        masks = masks.index_put((covered,), self.light_field(self.coords[frame][covered]))
+        masks = masks.index_put((covered,), self.light_field(self._coordinates(frame, covered.shape)[covered]))
         return masks.permute(2, 0, 1) * coverage
 
     def region_probability(self, frame: int, coverage: torch.Tensor) -> torch.Tensor | None:
         """g [H, W] where the face is rendered (0 elsewhere: M_o = M_R g and L_seg only see it there)."""
         if self.region_field is None:
             return None
-        return self.region_field.masked(self.coords[frame], coverage > 0)
+        return self.region_field.masked(self._coordinates(frame, coverage.shape), coverage > 0)
+
+    def _coordinates(self, frame: int, shape: torch.Size) -> torch.Tensor:
+        """(x, y, t) [H, W, 3] of the frame's pixel centres for an [H, W] frame (the working size or
+        stage 2's half size: the same normalised range)."""
+        frames, height, width = self.coords.shape[:3]
+        if tuple(shape) == (height, width):
+            return self.coords[frame]
+        if tuple(shape) not in self._other_sizes:
+            self._other_sizes[tuple(shape)] = video_coordinates(frames, *shape)
+        return self._other_sizes[tuple(shape)][frame]
 
     def face_region(self, frame: int, coverage: torch.Tensor, classifier: torch.Tensor | None,
                     probability: torch.Tensor | None = None) -> torch.Tensor:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import torch
 
 from deface.decouple.ace import light_areas
+from deface.fit.coarse import can_coarsen, coarse_context, half_size
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
 from deface.fit.state import FrameRender, LossTerms, StageContext
@@ -34,13 +35,15 @@ def run_stage2(context: StageContext) -> Stage2Result:
     guard = StepGuard(optimiser, "stage 2", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
     history, term_history = [], []
     ace_at = min(config.decouple.ace_iteration, config.iterations.stage2 - 1)
+    coarse_steps, coarse = _coarse_level(context)
     for step in range(config.iterations.stage2):
+        level = coarse if step < coarse_steps else context
         if step == ace_at and decoupling.light_field is not None:
-            _apply_ace(context)
+            _apply_ace(level)
         optimiser.zero_grad(set_to_none=True)
         refresh = step % config.render.shadow_refresh_every == 0
         terms = LossTerms()
-        loss = _stage2_loss(context, before_ace=step < ace_at, refresh_shadows=refresh, terms=terms)
+        loss = _stage2_loss(level, before_ace=step < ace_at, refresh_shadows=refresh, terms=terms)
         loss.backward()
         optimiser.step()
         scene.clamp_(context.model.expression_prior)
@@ -53,11 +56,23 @@ def run_stage2(context: StageContext) -> Stage2Result:
         context.log.step("stage 2", step, config.iterations.stage2, value, terms.values)
         iterations = config.iterations
         if step + 1 < iterations.stage2 and converged(history, iterations.convergence_window,
-                                                      iterations.stage2_tolerance, start=ace_at + 1):
+                                                      iterations.stage2_tolerance,
+                                                      start=max(ace_at + 1, coarse_steps)):
             context.log.info(f"stage 2 converged after {step + 1} of {iterations.stage2} steps "
                              f"(tolerance {iterations.stage2_tolerance} per {iterations.convergence_window} steps)")
             break
     return Stage2Result(history, term_history, decoupling.kept)
+
+
+def _coarse_level(context: StageContext) -> tuple[int, StageContext | None]:
+    """How many first steps run at half size, and that level (deface/fit/coarse.py)."""
+    iterations = context.config.iterations
+    steps = min(iterations.stage2_coarse, iterations.stage2)
+    if steps <= 0 or not can_coarsen(context.target.size, iterations.coarse_min_side):
+        return 0, None
+    context.log.info(f"stage 2: the first {steps} of {iterations.stage2} steps at half size "
+                     f"({'x'.join(map(str, half_size(context.target.size)))} pixels)")
+    return steps, coarse_context(context)
 
 
 def _parameter_groups(context: StageContext) -> list[dict]:

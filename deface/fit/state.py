@@ -42,14 +42,15 @@ class LandmarkTarget:
     """L_lan's target: the detected points in the correspondence's order."""
 
     correspondence: Correspondence  # MediaPipe point -> model surface point
-    detected: torch.Tensor  # [T, N, 2] detected points at working resolution, pixels
+    detected: torch.Tensor  # [T, N, 2] detected points in the frame's pixels
     weights: torch.Tensor  # [N] per-point weights of the correspondence
+    pixel_scale: float = 1.0  # the frame's pixels per working pixel (0.5 at stage 2's half-size level)
 
     def loss(self, geometry: FrameGeometry, frame: int) -> torch.Tensor:
-        """L_lan as in the authors' code: weighted mean squared pixel distance of the projected points
-        of ``geometry`` (the frame's posed mesh and camera)."""
+        """L_lan as in the authors' code: weighted mean squared distance, in working pixels, of the projected
+        points of ``geometry`` (the frame's posed mesh and camera)."""
         points, _ = geometry.camera.project(model_landmarks(geometry.mesh.vertices, self.correspondence))
-        return landmark_loss(points, self.detected[frame], 1.0, self.weights, squared=True)
+        return landmark_loss(points, self.detected[frame], self.pixel_scale, self.weights, squared=True)
 
 
 @dataclass(frozen=True)
@@ -82,14 +83,16 @@ class PosedFace:
     scene: SceneParameters  # trainable, changed in place by the optimisers
     topology: dict[str, torch.Tensor]  # triangles [F, 3], uvs [Vt, 2], triangle_uvs [F, 3]
     renderer: Renderer
-    size: tuple[int, int]  # (W, H) working resolution
+    size: tuple[int, int]  # (W, H) of the frames it is drawn at (the working resolution but in
+    # stage 2's half-size steps, deface/fit/coarse.py)
+    pixel_scale: float = 1.0  # those frames' pixels per working pixel (scales the focal length)
 
     @classmethod
     def create(cls, model: FaceModel, scene: SceneParameters, config: FitConfig, size: tuple[int, int]):
         return cls(model, scene, topology_tensors(model), Renderer(FitTarget.render_config(config)), size)
 
     def geometry(self, frame: int) -> FrameGeometry:
-        return frame_geometry(self.model, self.scene, self.topology, frame, self.size)
+        return frame_geometry(self.model, self.scene, self.topology, frame, self.size, self.pixel_scale)
 
     def fragments(self, frame: int) -> tuple[FrameGeometry, Fragments]:
         """The frame's geometry and what covers each working pixel."""
