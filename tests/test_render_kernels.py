@@ -241,9 +241,68 @@ def test_primary_rays_only_in_triangle_boxes_find_every_hit():
     loss = Loss()
     for params in (loss.params, {**loss.params, "focal": torch.tensor(90.0, dtype=torch.float64)}):
         cam = loss.camera(params)
-        ids = loss.renderer.rasterize(loss.mesh, cam).triangle_id.reshape(-1).numpy()
+        with kernels.backend("torch"):  # the Embree path (the numba one is the z-buffer, below)
+            ids = loss.renderer.rasterize(loss.mesh, cam).triangle_id.reshape(-1).numpy()
         every = loss.renderer.ray_scene(loss.mesh).first_triangles(*_pixel_rays(cam, np.arange(ids.shape[0])))
         assert np.array_equal(ids, every) and bool((ids >= 0).any())
+
+
+def _min_barycentric(projected: np.ndarray, triangles: np.ndarray, flat: np.ndarray, ids: np.ndarray,
+                     width: int) -> np.ndarray:
+    """Smallest screen-space barycentric (float64) of the centres of pixels ``flat`` in triangles ``ids``."""
+    ys, xs = np.divmod(flat, width)
+    p = np.stack([xs + 0.5, ys + 0.5], -1)
+    a, b, c = (projected[triangles[ids, k]] for k in range(3))
+
+    def edge(u, v, q):
+        return (v[:, 0] - u[:, 0]) * (q[:, 1] - u[:, 1]) - (v[:, 1] - u[:, 1]) * (q[:, 0] - u[:, 0])
+
+    area = edge(a, b, c)
+    return np.minimum(np.minimum(edge(b, c, p) / area, edge(c, a, p) / area), edge(a, b, p) / area)
+
+
+def _zbuffer_disagreements(renderer: Renderer, mesh, cam: Camera) -> tuple[int, int]:
+    """Asserts the z-buffer gives Embree's triangle except where a pixel centre lies on an edge (within
+    float32 rounding) of the triangle one of the two picked; returns (covered pixels, disagreements)."""
+    with kernels.backend("torch"):
+        embree = renderer.rasterize(mesh, cam).triangle_id.reshape(-1).numpy()
+    with kernels.backend("numba"):
+        zbuffer = renderer.rasterize(mesh, cam).triangle_id.reshape(-1).numpy()
+    differ = np.flatnonzero(zbuffer != embree)
+    projected = cam.resolved().project(mesh.vertices)[0].detach().double().numpy()
+    triangles = mesh.triangles.numpy()
+    nearest_edge = np.full(differ.size, np.inf)
+    for ids in (embree[differ], zbuffer[differ]):
+        hit = ids >= 0
+        inside = _min_barycentric(projected, triangles, differ[hit], ids[hit], cam.width)
+        assert np.all(inside > -1e-4)  # whichever picked a triangle, the centre is in it (up to rounding)
+        nearest_edge[hit] = np.minimum(nearest_edge[hit], np.abs(inside))
+    assert np.all(nearest_edge < 1e-4)  # and it lies on the edge of one of them
+    return int((embree >= 0).sum()), int(differ.size)
+
+
+def test_zbuffer_finds_embree_s_triangles_except_on_edges():
+    """The z-buffer (numba path of the primary visibility) against Embree's primary rays (its reference)."""
+    loss = Loss()
+    turned = loss.params["rotation"] + torch.tensor([0.2, 0.5, 0.1], dtype=loss.params["rotation"].dtype)
+    for params in (loss.params, {**loss.params, "focal": torch.tensor(90.0, dtype=torch.float64)},
+                   {**loss.params, "rotation": turned}):
+        covered, differ = _zbuffer_disagreements(loss.renderer, loss.mesh, loss.camera(params))
+        assert covered > 100 and differ <= 0.002 * covered
+
+
+def test_zbuffer_on_the_face_mesh(shared):
+    from deface.models import load_face_model
+    from deface.render.mesh import Mesh
+
+    model = load_face_model("ict")
+    mesh = Mesh(torch.as_tensor(model.mean_shape), torch.as_tensor(model.triangles, dtype=torch.long),
+                torch.as_tensor(model.uvs), torch.as_tensor(model.triangle_uvs, dtype=torch.long))
+    renderer = Renderer(RenderConfig(bands=3, shadow_rays=8))
+    for rotation in ([np.pi, 0.0, 0.0], [np.pi, 0.6, 0.1]):  # frontal, then turned (self-occlusion)
+        cam = Camera(torch.tensor(700.0), torch.tensor(rotation), torch.tensor([0.0, 1.0, 60.0]), 256, 256)
+        covered, differ = _zbuffer_disagreements(renderer, mesh, cam)
+        assert covered > 10_000 and differ <= 0.001 * covered
 
 
 def test_render_values_and_gradients_match_reference():

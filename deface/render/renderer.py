@@ -2,7 +2,9 @@
 
 Pipeline (one call renders every light condition; the geometry is visited once):
 1. ``rasterize``: Embree casts one ray per pixel centre (only inside the mesh's projected bounding box)
-   and returns the hit triangle id. Barycentrics are then *recomputed in torch* from the projected
+   and returns the hit triangle id; with the numba kernels and every vertex in front of the camera a
+   z-buffer over the projected triangles finds the same ids without building Embree's scene each step.
+   Barycentrics are then *recomputed in torch* from the projected
    triangle corners (2-D edge functions at the pixel centre, then perspective-corrected with the
    corners' camera depths), so gradients reach vertex positions and every camera parameter.
 2. ``shade``: per-vertex SH irradiance [V, K*3] (analytic unshadowed term minus the ray-traced occluded
@@ -163,6 +165,9 @@ class Renderer:
             x1, y1 = min(hi[0] + 1, width), min(hi[1] + 1, height)
         if x0 >= x1 or y0 >= y1:
             return triangle_id
+        if in_front and kernels.enabled(pixels):  # z-buffer: no Embree build per geometry (its reference)
+            return kernels.nearest_triangles(pixels.numpy(), depth.numpy(), mesh.triangles.cpu().numpy(),
+                                             height, width)
         if in_front:
             # only pixels inside some triangle's projected box (a ray elsewhere cannot hit): ~half as many rays
             flat = kernels.triangle_box_pixels(pixels, mesh.triangles, height, width)

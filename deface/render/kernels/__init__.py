@@ -15,8 +15,8 @@ around them and the registration (the dispatch rule):
     reflection.py      reflect                               mirrored view directions per vertex
     texture.py         sample_texture (+ texel scatter)      bilinear lookup, grid_sample semantics
     shading.py         shade                                 the fused pixel stage (every screen buffer)
-    selection.py       renumber, triangle_box_pixels,        used vertices, primary-ray pixels and directions
-                       pixel_directions
+    selection.py       renumber, triangle_box_pixels,        used vertices, primary-ray pixels and directions;
+                       pixel_directions (+ nearest_triangles) the z-buffer that replaces the primary rays
     base.py            backend switch, threads, serial/parallel compilation, ``Op`` and ``register``
 
 Why: the torch versions spend their time in hundreds of small ops, broadcasts and [N, B*C] temporaries;
@@ -46,7 +46,7 @@ from deface.render.kernels.interpolation import (
 )
 from deface.render.kernels.normals import vertex_normals, vertex_normals_backward, vertex_normals_forward
 from deface.render.kernels.reflection import reflect, reflect_backward, reflect_forward
-from deface.render.kernels.selection import pixel_directions, renumber, triangle_box_pixels
+from deface.render.kernels.selection import nearest_triangles, pixel_directions, renumber, triangle_box_pixels
 from deface.render.kernels.sh_bands import (
     kernel_constants,
     sh_band_sums,
@@ -120,6 +120,7 @@ __all__ = [
     "thread_count",
     "to_screen",
     "triangle_box_pixels",
+    "nearest_triangles",
     "vertex_normals",
     "vertex_normals_backward",
     "vertex_normals_forward",

@@ -1,7 +1,9 @@
 """Which vertices and pixels a render touches (no gradients): the vertices used by the covered pixels'
 corners renumbered into that subset (``renumber``), the pixels whose centre lies in some projected
-triangle's box (``triangle_box_pixels``: the primary rays worth tracing) and the primary rays' unit
-directions (``pixel_directions``).
+triangle's box (``triangle_box_pixels``: the primary rays worth tracing), the primary rays' unit
+directions (``pixel_directions``), and the primary visibility itself by z-buffer (``nearest_triangles``:
+the fast path of Embree's primary rays, which are its reference; not an ``Op`` because a pixel centre on an
+edge shared by two triangles may go to either, tests/test_render_kernels.py compares the two).
 
 References: torch / numpy array ops. Fast: single passes in numba (no sorts, no index ops).
 """
@@ -151,6 +153,49 @@ def _mark_triangle_boxes(pixels, triangles, mask):
         for y in range(y0, y1 + 1):
             for x in range(x0, x1 + 1):
                 mask[y, x] = True
+
+
+def nearest_triangles(pixels: np.ndarray, depth: np.ndarray, triangles: np.ndarray, height: int,
+                      width: int) -> np.ndarray:
+    """Primary visibility by z-buffer: [H * W] int64, per pixel the nearest triangle whose projection contains
+    the pixel centre (-1: none), from the vertices projected to pixels [V, 2] and their camera depths [V] (all
+    in front of the camera), triangles [F, 3]. Nearest by perspective-correct depth (1 / z is linear in the
+    screen-space barycentrics); a centre exactly on an edge belongs to both triangles (the nearer wins, then
+    the lower id). About a millisecond for the 256² face, against ~20 for an Embree build and cast."""
+    ids = np.full(height * width, -1, dtype=np.int64)
+    _zbuffer(np.ascontiguousarray(pixels, dtype=np.float64), np.ascontiguousarray(depth, dtype=np.float64),
+             np.ascontiguousarray(triangles, dtype=np.int64), height, width, ids)
+    return ids
+
+
+@njit(cache=True)
+def _zbuffer(pixels, depth, triangles, height, width, ids):
+    nearest = np.zeros(height * width)  # 1 / depth of the nearest hit so far (0: none yet)
+    for f in range(triangles.shape[0]):
+        i0, i1, i2 = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        ax, ay, bx, by = pixels[i0, 0], pixels[i0, 1], pixels[i1, 0], pixels[i1, 1]
+        cx, cy = pixels[i2, 0], pixels[i2, 1]
+        area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+        if not np.isfinite(area) or area == 0.0:
+            continue  # degenerate (NaN or edge-on): no ray hits it
+        x0 = max(int(np.ceil(min(ax, bx, cx) - 0.5)), 0)
+        x1 = min(int(np.floor(max(ax, bx, cx) - 0.5)), width - 1)
+        y0 = max(int(np.ceil(min(ay, by, cy) - 0.5)), 0)
+        y1 = min(int(np.floor(max(ay, by, cy) - 0.5)), height - 1)
+        for y in range(y0, y1 + 1):
+            py = y + 0.5
+            for x in range(x0, x1 + 1):
+                px = x + 0.5
+                w0 = ((cx - bx) * (py - by) - (cy - by) * (px - bx)) / area  # weight of corner 0: edge 1 -> 2
+                w1 = ((ax - cx) * (py - cy) - (ay - cy) * (px - cx)) / area
+                w2 = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / area
+                if w0 < 0.0 or w1 < 0.0 or w2 < 0.0:
+                    continue
+                inverse = w0 / depth[i0] + w1 / depth[i1] + w2 / depth[i2]
+                k = y * width + x
+                if inverse > nearest[k]:
+                    nearest[k] = inverse
+                    ids[k] = f
 
 
 # -- dispatch ---------------------------------------------------------------------------------------
