@@ -81,8 +81,8 @@ def test_the_half_size_level_shares_the_parameters_and_measures_landmarks_in_wor
 
 
 def test_stage2_runs_its_first_steps_at_half_size_then_at_the_working_size(shared):
-    context = _context(48, **{"iterations.stage2": 6, "decouple.ace_iteration": 2, "iterations.stage2_coarse": 3,
-                              "iterations.coarse_min_side": 16})
+    context = _context(48, **{"iterations.stage2": 6, "decouple.ace_iteration": 2,
+                              "iterations.stage2_coarse_share": 0.5, "iterations.coarse_min_side": 16})
     messages = []
     context.log.info = messages.append
     result = run_stage2(context)

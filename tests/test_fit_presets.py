@@ -20,14 +20,16 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
                        "texture_pyramid.levels": presets.TEXTURE_LEVELS, "completion.enabled": True,
                        "iterations.stage3_tolerance": presets.STAGE3_TOLERANCE, "tone.free_tone": True,
                        "tone.scene_light_prior": True, "decouple.clipped_as_bound": True,
-                       "tone.learning_rate": presets.TONE_STEP}
+                       "tone.learning_rate": presets.TONE_STEP,
+                       "iterations.stage2_coarse_share": presets.STAGE2_COARSE_SHARE}
 
 
 def test_mean_skin_is_deface_without_the_skin_tone_work():
     deface, mean_skin = flatten(presets.get("deface")), flatten(presets.get("deface-mean-skin"))
     changed = {key: mean_skin[key] for key in deface if deface[key] != mean_skin[key]}
     assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False,
-                       "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3}
+                       "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3,
+                       "iterations.stage2_coarse_share": 0.0}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():

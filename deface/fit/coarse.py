@@ -1,4 +1,4 @@
-"""Stage 2's first steps on the frames at half size (``iterations.stage2_coarse``).
+"""Stage 2's first steps on the frames at half size (``iterations.stage2_coarse_share``).
 
 Stage 2 fits few, smooth unknowns: pose, shape, expression and albedo coefficients, the SH lights, and the
 fields f and g over normalised image coordinates. None of them is tied to the pixel grid, so the first steps

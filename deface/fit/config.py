@@ -107,10 +107,10 @@ class Iterations:
     """Statistical fit with light decoupling (iter_2)."""
     stage3: int = 200
     """Per-texel refinement (iter_3)."""
-    stage2_coarse: int = 0
-    """Stage 2's first steps at half the working size (deface/fit/coarse.py: a quarter of the per-pixel work;
-    pose, shape, albedo coefficients, lights and f, g are not tied to the pixel grid); the rest refine at the
-    working size. 0 = every step at the working size."""
+    stage2_coarse_share: float = 0.0
+    """Share of stage 2's steps run first at half the working size (deface/fit/coarse.py: a quarter of the
+    per-pixel work; pose, shape, albedo coefficients, lights and f, g are not tied to the pixel grid); the rest
+    refine at the working size. 0 = every step at the working size; a share, so `--iterations` keeps it."""
     coarse_min_side: int = 128
     """No half-size steps when the half size would be under this many pixels on its longer side."""
     stage2_tolerance: float = 0.0

@@ -22,7 +22,7 @@
   Its stage-3 maps are pyramids gated by the photos' pixels per texel, and unseen texels are completed
   (docs/textures.md): per-texel maps fill with colour noise where the photo does not resolve texels.
   Stage 3 stops early once its loss has settled (``Iterations.stage3_tolerance``), and stage 2 runs its
-  first half at half size (``Iterations.stage2_coarse``, deface/fit/coarse.py).
+  first half at half size (``Iterations.stage2_coarse_share``, deface/fit/coarse.py).
   It keeps the person's skin tone (``tone``, docs/skin-tone.md): the albedo's tone is free along a
   flat-prior tone axis, set from the skin in the key light (stage 2 keeps it), and the lights are held to
   the scene's illuminant. Without it the lights absorb every skin's tone and all textures come out alike (regression
@@ -92,9 +92,10 @@ FOURIER_OCTAVES = 4
 # 256² photo the last ~80 of 200 steps lowered the loss ~1 % in all; BENCHMARKS.md "Speed").
 STAGE3_TOLERANCE = 0.005
 
-# Stage 2's first steps at half size in `deface` (deface/fit/coarse.py): 200 of 400 kept target synthesis (25.98 ->
-# 25.99 dB), UV consistency and the ITA gap on the 8 shadow pairs at the full schedule (BENCHMARKS.md "Speed").
-STAGE2_COARSE = 200
+# Stage 2's first half at half size in `deface` and `fast` (deface/fit/coarse.py): 200 of 400 steps kept target
+# synthesis (25.98 -> 25.99 dB), UV consistency and the ITA gap on the 8 shadow pairs at the full schedule
+# (BENCHMARKS.md "Speed").
+STAGE2_COARSE_SHARE = 0.5
 
 # The tone stays at its start in `deface` (ToneConfig.learning_rate; BENCHMARKS.md "Skin tone").
 TONE_STEP = 0.0
@@ -109,7 +110,7 @@ def _deface() -> FitConfig:
         lights=LightConfig(num_lights=3),
         decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES,
                                 clipped_as_bound=True),
-        iterations=Iterations(stage3_tolerance=STAGE3_TOLERANCE, stage2_coarse=STAGE2_COARSE),
+        iterations=Iterations(stage3_tolerance=STAGE3_TOLERANCE, stage2_coarse_share=STAGE2_COARSE_SHARE),
         texture_pyramid=PyramidConfig(levels=TEXTURE_LEVELS),
         completion=CompletionConfig(enabled=True),
         tone=ToneConfig(free_tone=True, scene_light_prior=True, learning_rate=TONE_STEP),
@@ -118,12 +119,13 @@ def _deface() -> FitConfig:
 
 def _deface_mean_skin() -> FitConfig:
     return override(_deface(), preset="deface-mean-skin", tone=ToneConfig(),
-                    **{"decouple.clipped_as_bound": False, "iterations.stage2_coarse": 0})
+                    **{"decouple.clipped_as_bound": False, "iterations.stage2_coarse_share": 0.0})
 
 
 def _fast() -> FitConfig:
     return override(_deface(), preset="fast", resolution=192, texture_size=256, **{"render.shadow_rays": 64},
-                    iterations=Iterations(stage1=150, stage2=150, stage3=60, stage3_tolerance=STAGE3_TOLERANCE),
+                    iterations=Iterations(stage1=150, stage2=150, stage3=60, stage3_tolerance=STAGE3_TOLERANCE,
+                                          stage2_coarse_share=STAGE2_COARSE_SHARE),
                     **{"decouple.ace_iteration": 50})
 
 

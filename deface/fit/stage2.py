@@ -67,7 +67,7 @@ def run_stage2(context: StageContext) -> Stage2Result:
 def _coarse_level(context: StageContext) -> tuple[int, StageContext | None]:
     """How many first steps run at half size, and that level (deface/fit/coarse.py)."""
     iterations = context.config.iterations
-    steps = min(iterations.stage2_coarse, iterations.stage2)
+    steps = min(round(iterations.stage2_coarse_share * iterations.stage2), iterations.stage2)
     if steps <= 0 or not can_coarsen(context.target.size, iterations.coarse_min_side):
         return 0, None
     context.log.info(f"stage 2: the first {steps} of {iterations.stage2} steps at half size "
