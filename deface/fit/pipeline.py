@@ -34,6 +34,7 @@ from deface.models.registry import load_face_model
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
 from deface.priors.illuminant import estimate_illuminant
+from deface.runtime import keep_freed_memory
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,7 @@ def fit_target(target: FitTarget, config: FitConfig, *, models_dir=None, log: Fi
 
 def run_stages(target: FitTarget, config: FitConfig, *, models_dir=None, log: FitLog | None = None) -> FitState:
     """:func:`fit_target` keeping every stage's result."""
+    keep_freed_memory()  # no page faults on each step's temporaries (deface/runtime.py)
     with torch_threads(config.threads):
         return _run_stages(target, config, models_dir, log or FitLog())
 
