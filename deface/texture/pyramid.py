@@ -24,6 +24,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from deface.texture import fast_pyramid
+
 
 @dataclass(frozen=True)
 class PyramidConfig:
@@ -79,6 +81,13 @@ class TexturePyramid(torch.nn.Module):
             self.register_buffer(f"gate{index}", gate.detach().clone())
 
     def forward(self) -> torch.Tensor:
+        gates = [getattr(self, f"gate{index}") for index in range(len(self.levels))]
+        if fast_pyramid.enabled(self.initial):  # one loop per level (deface/texture/fast_pyramid.py)
+            return fast_pyramid.pyramid_map(self.initial, list(self.levels), gates)
+        return self.reference()
+
+    def reference(self) -> torch.Tensor:
+        """The map by torch ops (the definition the fast path is tested against)."""
         size = self.initial.shape[:2]
         total = torch.zeros_like(self.initial).permute(2, 0, 1)  # [C, N, N]
         for index, level in enumerate(self.levels):
