@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from skimage.color import lab2rgb
 
-from deface.fit.scene_light import SkinPixels, lit_skin_albedo
+from deface.fit import scene_light
+from deface.fit.scene_light import SKIN_F0, SkinPixels, lit_skin_albedo
 from deface.io.images import linear_to_srgb
 from deface.models.ita import ita_of_srgb
 from deface.priors.illuminant import planckian_rgb
@@ -33,13 +34,15 @@ def hemisphere(count: int = 6000, seed: int = 0) -> np.ndarray:
 
 
 def photo(albedo: np.ndarray, white: np.ndarray, normals: np.ndarray, *, shadow=None, specular=0.0,
-          exposure=1.0) -> SkinPixels:
-    """Skin pixels lit by the key light (peak white response ``white``) plus ambient."""
+          exposure=1.0, sheen=SKIN_F0) -> SkinPixels:
+    """Skin pixels lit by the key light (peak white response ``white``) plus ambient; the surface mirrors
+    ``sheen`` of the ambient light (a uniform sky on a rough dielectric at normal incidence), as skin does."""
     shading = AMBIENT + (1 - AMBIENT) * np.clip(normals @ KEY, 0, None)
     if shadow is not None:  # a cast shadow keeps the ambient and a fraction of the key light
         shading = np.where(shadow, AMBIENT + 0.3 * (shading - AMBIENT), shading)
     half = (KEY + [0, 0, 1]) / np.linalg.norm(KEY + [0, 0, 1])
     highlight = specular * np.clip(normals @ half, 0, 1) ** 60
+    highlight = highlight + sheen * AMBIENT
     linear = exposure * white * (albedo * shading[:, None] + highlight[:, None])
     in_boxes = np.abs(normals[:, 0]) > 0.35  # "the cheeks"
     to_camera = np.broadcast_to([0.0, 0.0, 1.0], normals.shape)
@@ -61,6 +64,34 @@ def test_recovers_the_albedo_under_the_scene_light(ita, cct):
     ratio = lit_skin_albedo(photo(skin_albedo(ita), white, hemisphere()), white) / skin_albedo(ita)
     assert ratio == pytest.approx(np.full(3, ratio.mean()), rel=0.02)
     assert 0.85 <= ratio.mean() <= 1.0
+
+
+@pytest.mark.parametrize(("ita", "lighter"), [(-30.0, 1.06), (50.0, 1.01)])
+def test_the_skins_sheen_is_not_taken_for_a_lighter_skin(ita, lighter, monkeypatch):
+    """Skin mirrors F0 = 2.8 % of the ambient light over the whole face, a tenth of a dark skin's own level:
+    the start takes it off, so skin with its sheen gives the albedo that skin without it gives; read as albedo,
+    it would make a dark skin's level ``lighter`` times brighter (and a light skin's by little)."""
+    white, normals = np.ones(3), hemisphere()
+    albedo = skin_albedo(ita)
+    with_sheen = lit_skin_albedo(photo(albedo, white, normals), white)
+    monkeypatch.setattr(scene_light, "SKIN_F0", 0.0)
+    without = lit_skin_albedo(photo(albedo, white, normals, sheen=0.0), white)
+    read_as_albedo = lit_skin_albedo(photo(albedo, white, normals), white)
+    assert with_sheen == pytest.approx(without, rel=0.05)  # the photo's ambient is 0.25 of W, the start takes 0.3
+    assert read_as_albedo[1] / without[1] > lighter
+
+
+def test_no_ambient_light_no_sheen_taken_off(monkeypatch):
+    """A hard key light in a dark room: the envelope shows no ambient light, so there is no ambient sheen to take
+    off and the start is what it is without the correction."""
+    import test_fit_scene_light as here
+
+    monkeypatch.setattr(here, "AMBIENT", 0.0)
+    white, normals = np.ones(3), hemisphere()
+    pixels = photo(skin_albedo(-10.0), white, normals, sheen=0.0)
+    corrected = lit_skin_albedo(pixels, white)
+    monkeypatch.setattr(scene_light, "SKIN_F0", 0.0)
+    assert corrected == pytest.approx(lit_skin_albedo(pixels, white), rel=1e-6)
 
 
 def test_a_cast_shadow_over_the_cheeks_leaves_the_start_alone():
@@ -126,7 +157,9 @@ def test_red_clipped_on_all_the_lit_skin_takes_the_colour_from_the_rest():
     the skin whose red is not (the ratio does not depend on the shading), the level from green."""
     white, normals = np.ones(3), hemisphere()
     albedo = np.array([0.25, 0.1, 0.05])
-    over = photo(albedo, white, normals, exposure=9.0)  # a surface facing the light: green 0.9, red 2.25
+    # a surface facing the light: green 0.9, red 2.25 (without sheen: nine times the light W says, it is not
+    # what the start takes off)
+    over = photo(albedo, white, normals, exposure=9.0, sheen=0.0)
     green = over.srgb[:, 1] ** 2.2
     lit = green >= 0.5 * np.quantile(green, 0.9)  # the candidates for the key light's envelope
     assert (over.srgb[lit, 0] >= 0.98).mean() > 0.99

@@ -24,7 +24,16 @@ whole face, not only the measured regions:
    pixels in a cast or attached shadow fall below the band and leave the fit;
 3. no highlights: pixels whose normal is within ``HIGHLIGHT_COS`` of the half vector between the key light
    (a / |a|) and the camera are left out;
-4. level: the ``KEY_QUANTILE`` (90th percentile) of the green level of the lit skin, the same quantile the
+4. no sheen: skin is a dielectric whose surface reflects a share of every light in the light's own colour
+   (the dichromatic model, Shafer 1985), F0 = 0.028 at normal incidence (skin's refractive index 1.4: Donner
+   and Jensen 2006; Weyrich et al. 2006 measured 1.38). Under a broad ambient light this sheen lies over the
+   whole face, not only in the highlight: a rough dielectric under a uniform sky mirrors F0 times the sky's
+   radiance, so with the ambient's white level A (``SHEEN_AMBIENT``) it adds F0 A to every channel of every
+   pixel, about 1 % of a white: 3 % of a light skin's level but 10-15 % of a dark skin's (it is what made dark
+   skins read lighter on the renders of known albedo). It is taken off before the level and the colour are
+   read (``_without_sheen``). Its growth towards grazing angles (Fresnel) is left alone: it depends on the
+   skin's roughness, and the 90th-percentile level comes from surfaces facing the light, not grazing ones;
+5. level: the ``KEY_QUANTILE`` (90th percentile) of the green level of the lit skin, the same quantile the
    scene-light level term holds the key light's white response to on the face (so start and prior agree);
    green because a skin's red clips first and its blue is the noisiest; the colour: each channel's median
    ratio to green over the lit pixels where that channel is not clipped.
@@ -48,6 +57,15 @@ LIT_BAND = (0.85, 1.25)
 """A pixel whose level lies within this fraction of the key-light envelope's is lit."""
 HIGHLIGHT_COS = 0.87
 """Normals within about 30 degrees of the half vector carry the specular highlight."""
+SKIN_F0 = 0.028
+"""Skin's reflectance at normal incidence, ((n - 1) / (n + 1))^2 for a refractive index n = 1.4 (Donner and
+Jensen 2006; Weyrich et al. 2006 fitted 1.38 to measured faces)."""
+SHEEN_AMBIENT = 0.3
+"""The ambient's white level A whose sheen the start takes off, as a share of the white level W (a white facing
+the key light): a typical daylight or key-plus-fill portrait. Not read from the face: the envelope's intercept
+gives it on a clean face (0.3-0.4 on the renders of known albedo) but takes a soft cast shadow for ambient light
+(twice the clean photo's A on a leaf-shadowed one), and the same person then got a darker tone (ITA gap on the
+shadow pairs 5.6 -> 6.8, target synthesis -0.4 dB)."""
 LEVEL_CHANNEL = 1  # green
 
 
@@ -106,6 +124,8 @@ def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
     lit = _key_lit(level, pixels, usable)
     if lit.sum() < MIN_PIXELS:
         return None
+    balanced = _without_sheen(balanced, pixels, lit)
+    level = balanced[:, LEVEL_CHANNEL]
     ratios = [_channel_ratio(balanced, level, unclipped[:, c], c, (lit, usable)) for c in range(3)]
     if not np.all(np.isfinite(ratios)):
         return None
@@ -136,6 +156,17 @@ def _skin_coloured(balanced: np.ndarray, unclipped: np.ndarray, in_boxes: np.nda
         return np.zeros(len(balanced), dtype=bool)
     distance = np.where(unclipped, np.abs(ratios - np.median(ratios[reference], axis=0)), 0.0)
     return unclipped[:, LEVEL_CHANNEL] & (distance.max(-1) < SKIN_CHROMA)
+
+
+def _without_sheen(balanced: np.ndarray, pixels: SkinPixels, lit: np.ndarray) -> np.ndarray:
+    """``balanced`` [N, 3] less the skin's surface reflection of the ambient light, F0 A in every channel (module
+    doc, item 4), A = ``SHEEN_AMBIENT``; none where the key light's envelope a0 + a . n over the ``lit`` pixels
+    shows no ambient light (a0 <= 0: a hard light in a dark room) or no key light."""
+    design = np.concatenate([np.ones((int(lit.sum()), 1)), pixels.normals[lit]], 1)
+    coef = np.linalg.lstsq(design, balanced[lit, LEVEL_CHANNEL], rcond=None)[0]
+    if coef[0] <= 0 or np.linalg.norm(coef[1:]) <= 0:
+        return balanced
+    return np.maximum(balanced - SKIN_F0 * SHEEN_AMBIENT, 1e-6)
 
 
 def _key_lit(level: np.ndarray, pixels: SkinPixels, usable: np.ndarray, refits: int = 5) -> np.ndarray:

@@ -1,0 +1,90 @@
+"""The skin tone a fit starts from (before stage 2), without fitting: the part of the skin-tone figures that the
+scene's white level and the key-lit skin decide (stage 2 keeps the start in the default preset).
+
+    DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/tone_start.py synth [--resolution 256]
+    DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/tone_start.py pairs PAIRS_DIR [--resolution 128]
+    DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/tone_start.py photos
+
+``synth``: the renders of known albedo (../shared/data/skin-tone-synth), start ITA against ``gt_ita``, errors per
+light; ``pairs``: the pairs of ``deface bench make-shadows``, start ITA of the shadowed source against the clean
+target (the same person: the gap is what the shadow does to the start); ``photos``: the starts of
+../shared/data/skin-tone. Two processes, one thread each; about 10 s a set. The fits' own figures come from
+``deface bench skin-tone`` and ``deface bench run`` (the start is where stage 2 begins, not the fitted tone).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import statistics
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from deface.paths import shared_dir
+
+
+def start_ita(path: str, resolution: int, preset: str, settings: tuple[str, ...] = ()) -> float:
+    import torch
+
+    from deface.fit import pipeline, presets
+    from deface.fit.config import override, set_from_text
+    from deface.fit.log import FitLog
+    from deface.fit.target import FitTarget
+    from deface.io.images import load_image
+
+    torch.set_num_threads(1)
+    config = override(presets.get(preset), resolution=resolution)
+    for assignment in settings:
+        config = set_from_text(config, assignment)
+    work, landmarks, scale, _ = pipeline.detect([load_image(path)], config, path, False)
+    context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=FitLog(quiet=True))
+    return float(context.scene.tone.detach())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("set", choices=("synth", "pairs", "photos"))
+    parser.add_argument("pairs_dir", nargs="?")
+    parser.add_argument("--resolution", type=int)
+    parser.add_argument("--preset", default="default")
+    parser.add_argument("--set", dest="settings", action="append", default=[], help="PATH=VALUE (deface fit --set)")
+    args = parser.parse_args()
+    settings = tuple(args.settings)
+    with ProcessPoolExecutor(2) as pool:
+        if args.set == "synth":
+            root = shared_dir() / "data/skin-tone-synth"
+            rows = list(csv.DictReader(open(root / "MANIFEST.tsv"), delimiter="\t"))
+            starts = pool.map(start_ita, [str(root / "images" / r["file"]) for r in rows],
+                              [args.resolution or 256] * len(rows), [args.preset] * len(rows), [settings] * len(rows))
+            errors: dict[str, list[float]] = {}
+            for row, start in zip(rows, starts, strict=True):
+                error = start - float(row["gt_ita"])
+                errors.setdefault(row["kelvin"] + ("brim" if row["shadow"] == "1" else ""), []).append(error)
+                print(f"{row['file']:24s} truth {float(row['gt_ita']):6.1f} start {start:6.1f} error {error:+6.1f}")
+            every = [e for group in errors.values() for e in group]
+            for light, group in errors.items():
+                print(f"{light:9s} mean {statistics.mean(group):+5.1f}  MAE {statistics.mean(map(abs, group)):4.1f}")
+            print(f"all       MAE {statistics.mean(map(abs, every)):4.1f}  max {max(map(abs, every)):4.1f}")
+        elif args.set == "photos":
+            root = shared_dir() / "data/skin-tone"
+            rows = list(csv.DictReader(open(root / "MANIFEST.tsv"), delimiter="\t"))
+            starts = pool.map(start_ita, [str(root / "images" / r["file"]) for r in rows],
+                              [args.resolution or 256] * len(rows), [args.preset] * len(rows), [settings] * len(rows))
+            for row, start in zip(rows, starts, strict=True):
+                print(f"{row['file']:40s} {row['tone_group']:7s} start {start:6.1f}")
+        else:
+            pairs = sorted(p for p in Path(args.pairs_dir).iterdir() if (p / "source.png").exists())
+            paths = [str(p / name) for p in pairs for name in ("source.png", "target.png")]
+            starts = list(pool.map(start_ita, paths, [args.resolution or 128] * len(paths),
+                                   [args.preset] * len(paths), [settings] * len(paths)))
+            gaps = []
+            for index, pair in enumerate(pairs):
+                source, target = starts[2 * index], starts[2 * index + 1]
+                gaps.append(abs(source - target))
+                print(f"{pair.name:22s} source {source:6.1f} target {target:6.1f} gap {gaps[-1]:5.1f}")
+            print(f"mean gap {statistics.mean(gaps):.2f} over {len(gaps)} pairs; "
+                  f"first 8 {statistics.mean(gaps[:8]):.2f}")
+
+
+if __name__ == "__main__":
+    main()
