@@ -84,9 +84,7 @@ def test_the_skins_sheen_is_not_taken_for_a_lighter_skin(ita, lighter, monkeypat
 def test_no_ambient_light_no_sheen_taken_off(monkeypatch):
     """A hard key light in a dark room: the envelope shows no ambient light, so there is no ambient sheen to take
     off and the start is what it is without the correction."""
-    import test_fit_scene_light as here
-
-    monkeypatch.setattr(here, "AMBIENT", 0.0)
+    monkeypatch.setitem(globals(), "AMBIENT", 0.0)  # photo() reads it from this module
     white, normals = np.ones(3), hemisphere()
     pixels = photo(skin_albedo(-10.0), white, normals, sheen=0.0)
     corrected = lit_skin_albedo(pixels, white)
@@ -157,8 +155,8 @@ def test_red_clipped_on_all_the_lit_skin_takes_the_colour_from_the_rest():
     the skin whose red is not (the ratio does not depend on the shading), the level from green."""
     white, normals = np.ones(3), hemisphere()
     albedo = np.array([0.25, 0.1, 0.05])
-    # a surface facing the light: green 0.9, red 2.25 (without sheen: nine times the light W says, it is not
-    # what the start takes off)
+    # a surface facing the light: green 0.9, red 2.25; no sheen (under nine times the light W says it would be
+    # nine times what the start takes off: this test is about the clipped red)
     over = photo(albedo, white, normals, exposure=9.0, sheen=0.0)
     green = over.srgb[:, 1] ** 2.2
     lit = green >= 0.5 * np.quantile(green, 0.9)  # the candidates for the key light's envelope
