@@ -41,6 +41,19 @@ def start_ita(path: str, resolution: int, preset: str, settings: tuple[str, ...]
     return float(context.scene.tone.detach())
 
 
+def manifest(name: str) -> tuple[Path, list[dict]]:
+    """A shared dataset's folder and its MANIFEST.tsv rows."""
+    root = shared_dir() / "data" / name
+    return root, list(csv.DictReader(open(root / "MANIFEST.tsv"), delimiter="\t"))
+
+
+def starts_of(pool, paths: list[str], resolution: int, args) -> list[float]:
+    """The start ITA of every photo, two at a time."""
+    count = len(paths)
+    return list(pool.map(start_ita, paths, [resolution] * count, [args.preset] * count,
+                         [tuple(args.settings)] * count))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("set", choices=("synth", "pairs", "photos"))
@@ -49,13 +62,10 @@ def main() -> None:
     parser.add_argument("--preset", default="default")
     parser.add_argument("--set", dest="settings", action="append", default=[], help="PATH=VALUE (deface fit --set)")
     args = parser.parse_args()
-    settings = tuple(args.settings)
     with ProcessPoolExecutor(2) as pool:
         if args.set == "synth":
-            root = shared_dir() / "data/skin-tone-synth"
-            rows = list(csv.DictReader(open(root / "MANIFEST.tsv"), delimiter="\t"))
-            starts = pool.map(start_ita, [str(root / "images" / r["file"]) for r in rows],
-                              [args.resolution or 256] * len(rows), [args.preset] * len(rows), [settings] * len(rows))
+            root, rows = manifest("skin-tone-synth")
+            starts = starts_of(pool, [str(root / "images" / r["file"]) for r in rows], args.resolution or 256, args)
             errors: dict[str, list[float]] = {}
             for row, start in zip(rows, starts, strict=True):
                 error = start - float(row["gt_ita"])
@@ -66,17 +76,14 @@ def main() -> None:
                 print(f"{light:9s} mean {statistics.mean(group):+5.1f}  MAE {statistics.mean(map(abs, group)):4.1f}")
             print(f"all       MAE {statistics.mean(map(abs, every)):4.1f}  max {max(map(abs, every)):4.1f}")
         elif args.set == "photos":
-            root = shared_dir() / "data/skin-tone"
-            rows = list(csv.DictReader(open(root / "MANIFEST.tsv"), delimiter="\t"))
-            starts = pool.map(start_ita, [str(root / "images" / r["file"]) for r in rows],
-                              [args.resolution or 256] * len(rows), [args.preset] * len(rows), [settings] * len(rows))
+            root, rows = manifest("skin-tone")
+            starts = starts_of(pool, [str(root / "images" / r["file"]) for r in rows], args.resolution or 256, args)
             for row, start in zip(rows, starts, strict=True):
                 print(f"{row['file']:40s} {row['tone_group']:7s} start {start:6.1f}")
         else:
             pairs = sorted(p for p in Path(args.pairs_dir).iterdir() if (p / "source.png").exists())
             paths = [str(p / name) for p in pairs for name in ("source.png", "target.png")]
-            starts = list(pool.map(start_ita, paths, [args.resolution or 128] * len(paths),
-                                   [args.preset] * len(paths), [settings] * len(paths)))
+            starts = starts_of(pool, paths, args.resolution or 128, args)
             gaps = []
             for index, pair in enumerate(pairs):
                 source, target = starts[2 * index], starts[2 * index + 1]
