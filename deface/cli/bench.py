@@ -175,6 +175,7 @@ def skin_tone_command(
     for variant, recs in records.items():
         s = summary(photos, recs)
         groups = ", ".join(f"{g} {v:.1f}" for g, v in s["group_mae"].items())
+        speckles = ", ".join(f"{g} {v:.2f}" for g, v in s["group_speckle"].items())
         console.print(f"{variant}: MAE {s['mae']:.1f}, groups {groups}, bias {s['bias']:.2f}, "
-                      f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}")
+                      f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}; speckle {speckles}")
     console.print(f"wrote {output / 'report.md'} and {sheet}")
