@@ -142,7 +142,14 @@ class LearningRates:
     pose: float = 1e-4
     """Stage 2: rotation and translation."""
     stage3_diffuse: float = 0.005
-    """Stage 3: the diffuse UV map."""
+    """Stage 3: the diffuse UV map (at the level ``stage3_diffuse_level`` when that is set)."""
+    stage3_diffuse_level: float = 0.0
+    """The diffuse map's level (median linear green of T^0 over the face) at which ``stage3_diffuse`` is the
+    step; the step is then scaled by T^0's own level over this one. 0 = one step for every map (the paper's).
+    Adam moves each parameter by about its step whatever the gradient's size, so a fixed step is a fixed
+    change of albedo per texel: twice as large a share of a skin half as light, and a dark skin's texture got
+    about three times the texel noise of a light one (speckle 7.7-10.1 against 0-1.5 on the shadow pairs).
+    Scaled, every tone gets the same relative refinement (deface/fit/stage3.py :func:`diffuse_step`)."""
     stage3_specular: float = 0.005
     """Stage 3: the specular UV map."""
     stage3_roughness: float = 0.01

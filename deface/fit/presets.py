@@ -20,7 +20,9 @@
   on f's input, without which the authors' small MLP on raw (x, y) cannot draw the sharp, thin edges of
   blinds, fingers and leaves and the shadow is baked into the texture. ``paper`` keeps the paper's values.
   Its stage-3 maps are pyramids gated by the photos' pixels per texel, and unseen texels are completed
-  (docs/textures.md): per-texel maps fill with colour noise where the photo does not resolve texels.
+  (docs/textures.md): per-texel maps fill with colour noise where the photo does not resolve texels. The
+  diffuse map's step scales with its level (``LearningRates.stage3_diffuse_level``), so a dark skin's texels
+  are refined like a light skin's, not with three times the relative noise.
   Stage 3 stops early once its loss has settled (``Iterations.stage3_tolerance``), and stage 2 runs its
   first half at half size (``Iterations.stage2_coarse_share``, deface/fit/coarse.py).
   It keeps the person's skin tone (``tone``, docs/skin-tone.md): the albedo's tone is free along a
@@ -51,6 +53,7 @@ from deface.fit.config import (
     Weights,
     override,
 )
+from deface.models.albedo_prior import AlbedoPriorConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 
@@ -103,6 +106,12 @@ TONE_STEP = 0.0
 # Levels of the stage-3 texture pyramid in the default preset (deface/texture/pyramid.py, BENCHMARKS.md).
 TEXTURE_LEVELS = 5
 
+# Stage 3's diffuse step scales with T^0's level in `deface` (LearningRates.stage3_diffuse_level); the step of
+# 0.005 is the one the preset's stage 3 was tuned with, on the model's mean skin (green 0.33: Jensen et al.
+# 2001's mean Rd, deface/models/albedo_prior.py). On the 8 shadow pairs: speckle 2.90 -> 1.48, UV consistency
+# +0.2 dB, target synthesis +0.03 dB (BENCHMARKS.md "UV-space textures").
+DIFFUSE_STEP_LEVEL = AlbedoPriorConfig().skin_rgb[1]
+
 
 def _deface() -> FitConfig:
     return FitConfig(
@@ -114,6 +123,7 @@ def _deface() -> FitConfig:
         texture_pyramid=PyramidConfig(levels=TEXTURE_LEVELS),
         completion=CompletionConfig(enabled=True),
         tone=ToneConfig(free_tone=True, scene_light_prior=True, learning_rate=TONE_STEP),
+        learning_rates=LearningRates(stage3_diffuse_level=DIFFUSE_STEP_LEVEL),
     )
 
 

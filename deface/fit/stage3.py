@@ -30,6 +30,9 @@ from deface.render.supersample import shade_supersampled, supersampled_camera
 from deface.texture.confidence import TexelView
 from deface.texture.pyramid import TexturePyramid, level_gates, level_sizes
 
+MIN_LEVEL = 0.01
+"""Floor of the diffuse map's level in :func:`diffuse_step` (a darkest skin's green is about 0.03)."""
+
 
 @dataclass(frozen=True)
 class AlbedoReference:
@@ -96,7 +99,7 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     frozen = freeze_frames(context, initial)
     views = frame_views(context.model, frozen, initial.diffuse.shape[0])
     parameters = TextureParameters(initial, texture_gates(context, views, initial.diffuse.shape[0]))
-    optimiser = torch.optim.Adam(_parameter_groups(context, parameters))
+    optimiser = torch.optim.Adam(_parameter_groups(context, parameters, initial))
     guard = StepGuard(optimiser, "stage 3", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
     loss_of = objective(context, frozen, initial, human_prior)
     history, term_history, iterations = [], [], context.config.iterations
@@ -176,10 +179,23 @@ def _topology(context: StageContext):
     return topology["triangles"], topology["uvs"], topology["triangle_uvs"]
 
 
-def _parameter_groups(context: StageContext, parameters: TextureParameters) -> list[dict]:
+def diffuse_step(rates, diffuse: torch.Tensor, uv_mask: torch.Tensor) -> float:
+    """Stage 3's Adam step for the diffuse map [Ht, Wt, 3] whose face texels are ``uv_mask`` [Ht, Wt] > 0.5:
+    ``rates.stage3_diffuse``, scaled by the map's level (median linear green over the face) over
+    ``rates.stage3_diffuse_level`` when that is set (:class:`~deface.fit.config.LearningRates`). Adam's steps
+    do not scale with the gradient, so with a step proportional to the map, a map and the same map times c
+    (the same face, a darker skin) are refined alike up to the factor c."""
+    if rates.stage3_diffuse_level <= 0:
+        return rates.stage3_diffuse
+    level = float(diffuse[uv_mask > 0.5][:, 1].median()) if bool((uv_mask > 0.5).any()) else 0.0
+    return rates.stage3_diffuse * max(level, MIN_LEVEL) / rates.stage3_diffuse_level
+
+
+def _parameter_groups(context: StageContext, parameters: TextureParameters, initial: Textures) -> list[dict]:
     rates = context.config.learning_rates
+    step = diffuse_step(rates, initial.diffuse, _uv_mask(context, initial))
     groups = [
-        {"params": parameters.diffuse.parameters(), "lr": rates.stage3_diffuse},
+        {"params": parameters.diffuse.parameters(), "lr": step},
         {"params": parameters.specular.parameters(), "lr": rates.stage3_specular},
         {"params": parameters.roughness.parameters(), "lr": rates.stage3_roughness},
         {"params": [context.scene.lights], "lr": rates.stage3_lights},
