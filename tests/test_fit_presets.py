@@ -21,7 +21,8 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
                        "iterations.stage3_tolerance": presets.STAGE3_TOLERANCE, "tone.free_tone": True,
                        "tone.scene_light_prior": True, "decouple.clipped_as_bound": True,
                        "tone.learning_rate": presets.TONE_STEP,
-                       "iterations.stage2_coarse_share": presets.STAGE2_COARSE_SHARE}
+                       "iterations.stage2_coarse_share": presets.STAGE2_COARSE_SHARE,
+                       "learning_rates.stage3_diffuse_level": presets.DIFFUSE_STEP_LEVEL}
 
 
 def test_mean_skin_is_deface_without_the_skin_tone_work():
