@@ -112,14 +112,15 @@ def test_manifest_errors_are_one_line(tmp_path):
 def test_summary_figures_follow_their_definitions():
     photos = [TonePhoto(f"{g}{i}.png", g, ita) for g, itas in
               (("dark", (-20.0, 0.0)), ("medium", (20.0, 30.0)), ("light", (50.0, 60.0))) for i, ita in enumerate(itas)]
-    kept = {p.stem: {"albedo_ita": p.gt_ita + 2.0, "photo_ita": float("nan"), "speckle": float(len(p.stem))}
-            for p in photos}
+    kept = {p.stem: {"albedo_ita": p.gt_ita + 2.0, "photo_ita": float("nan"), "speckle": float(len(p.stem)),
+                     "detail": 1.0 if p.group == "dark" else 0.5} for p in photos}
     figures = summary(photos, kept)
     assert figures["mae"] == pytest.approx(2.0) and figures["bias"] == pytest.approx(0.0)
     assert figures["group_speckle"] == pytest.approx({"dark": 5.0, "medium": 7.0, "light": 6.0})
+    assert figures["group_detail"] == pytest.approx({"dark": 1.0, "medium": 0.5, "light": 0.5})
     assert figures["slope"] == pytest.approx(1.0) and figures["spearman"] == pytest.approx(1.0)
     flat = {p.stem: {"albedo_ita": 45.0, "photo_ita": float("nan")} for p in photos}
     figures = summary(photos, flat)  # one tone for everybody; records cached before speckle was measured
-    assert all(np.isnan(v) for v in figures["group_speckle"].values())
+    assert all(np.isnan(v) for v in [*figures["group_speckle"].values(), *figures["group_detail"].values()])
     assert figures["slope"] == pytest.approx(0.0, abs=1e-9)
     assert figures["group_mae"]["dark"] == pytest.approx(55.0) and figures["bias"] > 15

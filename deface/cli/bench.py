@@ -176,6 +176,7 @@ def skin_tone_command(
         s = summary(photos, recs)
         groups = ", ".join(f"{g} {v:.1f}" for g, v in s["group_mae"].items())
         speckles = ", ".join(f"{g} {v:.2f}" for g, v in s["group_speckle"].items())
+        details = ", ".join(f"{g} {v:.2f}" for g, v in s["group_detail"].items())
         console.print(f"{variant}: MAE {s['mae']:.1f}, groups {groups}, bias {s['bias']:.2f}, "
-                      f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}; speckle {speckles}")
+                      f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}; speckle {speckles}; detail {details}")
     console.print(f"wrote {output / 'report.md'} and {sheet}")

@@ -10,8 +10,9 @@ photo's light and exposure).
 Figures (FAIR's, Feng et al. 2022): mean absolute ITA error overall and per tone group; the bias score, the
 standard deviation of the groups' mean absolute errors; Spearman's rank correlation and the regression slope
 of albedo ITA on reference ITA (0: one tone for everybody; 1: the tone scale is kept). Beside the tone, the
-texture's speckle per group (deface/eval/uv_measure.py: fine contrast beyond the photo's, relative to the map's
-level): a fit whose texel noise grows as the skin darkens treats the groups unequally even when it keeps the tone.
+texture's speckle and detail per group (deface/eval/uv_measure.py: fine contrast beyond the photo's, and as a
+share of the photo's): a fit whose texel noise grows, or whose detail fades, as the skin darkens treats the
+groups unequally even when it keeps the tone.
 """
 
 from __future__ import annotations
@@ -106,7 +107,7 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
     return {"albedo_ita": texture_ita(to_srgb(result.textures.diffuse)),
             "initial_ita": texture_ita(to_srgb(result.initial_textures.diffuse)),
             "photo_ita": photo.ita, "photo_pixels": photo.pixels, "seconds": seconds,
-            "speckle": fit_detail(result)["speckle"],
+            **fit_detail(result),
             "tone": result.tone, "illuminant": result.illuminant}
 
 
@@ -143,7 +144,9 @@ def summary(photos: list[TonePhoto], records: dict) -> dict:
     slope = float(np.polyfit(reference[valid], albedo[valid], 1)[0]) if valid.sum() > 1 else float("nan")
     rho = float(stats.spearmanr(reference[valid], albedo[valid])[0]) if valid.sum() > 2 else float("nan")
     group_speckle = {g: _mean_of(records, photos, g, "speckle") for g in groups}
+    group_detail = {g: _mean_of(records, photos, g, "detail") for g in groups}
     return {"mae": float(np.nanmean(error)), "group_mae": group_mae, "group_speckle": group_speckle,
+            "group_detail": group_detail,
             "bias": float(np.std(list(group_mae.values()))), "spearman": rho, "slope": slope,
             "mean_signed": float(np.nanmean(albedo - reference)), "photos": int(valid.sum())}
 
@@ -162,20 +165,20 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
              f"{len(photos)} photos; reference = {reference_kind}; ITA in degrees over both cheeks and the forehead"
              " (docs/skin-tone.md). Bias = std of the groups' mean absolute errors; slope = regression slope of"
              " albedo ITA on the reference (1 keeps the tone scale, 0 gives everybody one tone). Speckle: the"
-             " texture's fine contrast beyond the photo's, relative to its level, x100, mean per group (0 = none;"
-             " docs/textures.md).",
+             " texture's fine contrast beyond the photo's, relative to its level, x100, mean per group (0 = none);"
+             " detail: its fine contrast as a share of the photo's (1 = all of it; docs/textures.md).",
              ""]
     groups = list(summary(photos, next(iter(records.values())))["group_mae"])
     lines += ["| variant | MAE | " + " | ".join(f"MAE {g}" for g in groups) + " | bias | Spearman | slope |"
-              " mean signed | max error | " + " | ".join(f"speckle {g}" for g in groups) + " |",
-              "|---" * (7 + 2 * len(groups)) + "|"]
+              " mean signed | max error | " + " | ".join(f"speckle {g}" for g in groups) + " | "
+              + " | ".join(f"detail {g}" for g in groups) + " |", "|---" * (7 + 3 * len(groups)) + "|"]
     for variant, recs in records.items():
         s = summary(photos, recs)
         worst = max(abs(recs[p.stem]["albedo_ita"] - reference_ita(p, recs[p.stem])) for p in photos
                     if np.isfinite(reference_ita(p, recs[p.stem])))
         cells = [f"{s['mae']:.1f}", *[f"{s['group_mae'][g]:.1f}" for g in groups], f"{s['bias']:.2f}",
                  f"{s['spearman']:.2f}", f"{s['slope']:.2f}", f"{s['mean_signed']:+.1f}", f"{worst:.1f}",
-                 *[f"{s['group_speckle'][g]:.2f}" for g in groups]]
+                 *[f"{s['group_speckle'][g]:.2f}" for g in groups], *[f"{s['group_detail'][g]:.2f}" for g in groups]]
         lines.append(f"| {variant} | " + " | ".join(cells) + " |")
     lines += ["", "| photo | group | reference | " + " | ".join(f"{v} albedo" for v in records) + " |",
               "|---|---|---|" + "---|" * len(records)]
