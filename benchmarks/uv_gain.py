@@ -5,8 +5,8 @@ chose), and how much is the maps' structure (shadow residue, detail placed on ot
 
 RESULTS is a ``deface bench run`` output folder. Per pair: the PSNR of the shadowed fit's sRGB diffuse map
 against the clean fit's over the model's UV face mask (all of it, not only the texels both fits saw, so the
-figures are below ``scores.json``'s), then the same after scaling the shadowed map's linear RGB by the
-per-channel least-squares gain onto the clean one.
+figures are not ``scores.json``'s: higher, as unseen texels are completed alike), then the same after scaling
+the shadowed map's linear RGB by the per-channel least-squares gain onto the clean one.
 """
 
 from __future__ import annotations

@@ -22,7 +22,7 @@
   Its stage-3 maps are pyramids gated by the photos' pixels per texel, and unseen texels are completed
   (docs/textures.md): per-texel maps fill with colour noise where the photo does not resolve texels. The
   diffuse map's step scales with its level (``LearningRates.stage3_diffuse_level``), so a dark skin's texels
-  are refined like a light skin's, not with three times the relative noise.
+  are refined like a light skin's, not with several times the relative noise.
   Stage 3 stops early once its loss has settled (``Iterations.stage3_tolerance``), and stage 2 runs its
   first half at half size (``Iterations.stage2_coarse_share``, deface/fit/coarse.py).
   It keeps the person's skin tone (``tone``, docs/skin-tone.md): the albedo's tone is free along a
