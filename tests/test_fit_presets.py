@@ -30,7 +30,7 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
     changed = {key: mean_skin[key] for key in deface if deface[key] != mean_skin[key]}
     assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False,
                        "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3,
-                       "iterations.stage2_coarse_share": 0.0}
+                       "iterations.stage2_coarse_share": 0.0, "learning_rates.stage3_diffuse_level": 0.0}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():

@@ -129,7 +129,8 @@ def _deface() -> FitConfig:
 
 def _deface_mean_skin() -> FitConfig:
     return override(_deface(), preset="deface-mean-skin", tone=ToneConfig(),
-                    **{"decouple.clipped_as_bound": False, "iterations.stage2_coarse_share": 0.0})
+                    **{"decouple.clipped_as_bound": False, "iterations.stage2_coarse_share": 0.0,
+                       "learning_rates.stage3_diffuse_level": 0.0})
 
 
 def _fast() -> FitConfig:
