@@ -17,18 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from PIL import Image
 
-from deface.io.images import linear_to_srgb, srgb_to_linear
+from deface.eval.metrics import psnr
+from deface.io.images import linear_to_srgb, load_image, srgb_to_linear
 from deface.models.registry import load_face_model
-
-
-def _srgb(path: Path) -> np.ndarray:
-    return np.asarray(Image.open(path).convert("RGB"), np.float32) / 255.0
-
-
-def _psnr(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
-    return float(10 * np.log10(1.0 / np.mean((a[mask] - b[mask]) ** 2)))
 
 
 def main() -> None:
@@ -39,14 +31,14 @@ def main() -> None:
     face_mask = torch.as_tensor(np.asarray(load_face_model("ict").albedo.face_mask, np.float32))
     raw, matched = [], []
     for pair in sorted(p for p in (args.results / args.variant).iterdir() if (p / "diffuse_source.png").exists()):
-        source, target = _srgb(pair / "diffuse_source.png"), _srgb(pair / "diffuse_target.png")
+        source, target = load_image(pair / "diffuse_source.png"), load_image(pair / "diffuse_target.png")
         mask = torch.nn.functional.interpolate(face_mask[None, None], size=source.shape[:2], mode="bilinear")
         mask = mask[0, 0].numpy() > 0.5
         linear_source, linear_target = srgb_to_linear(source), srgb_to_linear(target)
         gain = (linear_source[mask] * linear_target[mask]).sum(0) / (linear_source[mask] ** 2).sum(0)
         scaled = linear_to_srgb(np.clip(linear_source * gain, 0, 1))
-        raw.append(_psnr(source, target, mask))
-        matched.append(_psnr(scaled, target, mask))
+        raw.append(psnr(source, target, mask))
+        matched.append(psnr(scaled, target, mask))
         print(f"{pair.name:22s} PSNR {raw[-1]:6.2f}  gain-matched {matched[-1]:6.2f}  gain {np.round(gain, 3)}")
     print(f"{'mean':22s} PSNR {statistics.mean(raw):6.2f}  gain-matched {statistics.mean(matched):6.2f}")
 

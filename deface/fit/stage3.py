@@ -187,7 +187,8 @@ def diffuse_step(rates, diffuse: torch.Tensor, uv_mask: torch.Tensor) -> float:
     (the same face, a darker skin) are refined alike up to the factor c."""
     if rates.stage3_diffuse_level <= 0:
         return rates.stage3_diffuse
-    level = float(diffuse[uv_mask > 0.5][:, 1].median()) if bool((uv_mask > 0.5).any()) else 0.0
+    face = uv_mask > 0.5
+    level = float(diffuse[face][:, 1].median()) if bool(face.any()) else 0.0
     return rates.stage3_diffuse * max(level, MIN_LEVEL) / rates.stage3_diffuse_level
 
 
