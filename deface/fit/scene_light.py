@@ -20,8 +20,11 @@ whole face, not only the measured regions:
    ``SKIN_CHROMA`` of the cheeks' and forehead's median (a cast shadow keeps it; hair, beard, a white
    turban, glasses do not);
 2. lit: an upper envelope of the green level over the normals, y = a0 + a . n (the Lambertian key light plus
-   ambient, linear in n on the lit side), fitted to the pixels within ``LIT_BAND`` of it and refitted:
-   pixels in a cast or attached shadow fall below the band and leave the fit;
+   ambient, linear in n on the lit side), started as the ``ENVELOPE_QUANTILE`` (90 %) quantile regression of the
+   level on the normals (a shadow only darkens, so the lit skin is the top of the cloud even when the shadow
+   covers most of it, and where it falls on the brightest normals, a brim over the forehead, it cannot tilt the
+   envelope), then refitted by least squares to the pixels within ``LIT_BAND`` of it: pixels in a cast or
+   attached shadow fall below the band and leave the fit;
 3. no highlights: pixels whose normal is within ``HIGHLIGHT_COS`` of the half vector between the key light
    (a / |a|) and the camera are left out;
 4. no sheen: skin is a dielectric whose surface reflects a share of every light in the light's own colour
@@ -34,10 +37,13 @@ whole face, not only the measured regions:
    the fitted tone's 9.9 -> 9.8, BENCHMARKS.md). It is taken off before the level and the colour are
    read (``_without_sheen``). Its growth towards grazing angles (Fresnel) is left alone: it depends on the
    skin's roughness, and the 90th-percentile level comes from surfaces facing the light, not grazing ones;
-5. level: the ``KEY_QUANTILE`` (90th percentile) of the green level of the lit skin, the same quantile the
-   scene-light level term holds the key light's white response to on the face (so start and prior agree);
-   green because a skin's red clips first and its blue is the noisiest; the colour: each channel's median
-   ratio to green over the lit pixels where that channel is not clipped.
+5. level: the ``KEY_QUANTILE`` (90th percentile) over all the skin's normals of the lit skin's envelope, the same
+   quantile the scene-light level term holds the key light's white response to on the face (so start and prior
+   agree). It is read from the envelope, not from the lit pixels themselves, so that it does not depend on which
+   normals a shadow leaves lit (a brim over the forehead takes the skin facing the key light out of the lit
+   pixels, and their own 90th percentile then reads a darker skin: shadow pairs' start ITA gap 4.6 -> 3.5,
+   BENCHMARKS.md). Green because a skin's red clips first and its blue is the noisiest; the colour: each
+   channel's median ratio to green over the lit pixels where that channel is not clipped.
 """
 
 from __future__ import annotations
@@ -46,6 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from sklearn.linear_model import QuantileRegressor
 
 from deface.fit.state import SceneLight
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
@@ -56,6 +63,8 @@ SKIN_CHROMA = 0.12
 """Largest difference in log(red / green) and log(blue / green) from the cheeks' skin (about 12 %)."""
 LIT_BAND = (0.85, 1.25)
 """A pixel whose level lies within this fraction of the key-light envelope's is lit."""
+ENVELOPE_QUANTILE = 0.9
+"""Quantile of the level over the normals that starts the key light's envelope (the lit skin's upper part)."""
 HIGHLIGHT_COS = 0.87
 """Normals within about 30 degrees of the half vector carry the specular highlight."""
 SKIN_F0 = 0.028
@@ -130,7 +139,8 @@ def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
     ratios = [_channel_ratio(balanced, level, unclipped[:, c], c, (lit, usable)) for c in range(3)]
     if not np.all(np.isfinite(ratios)):
         return None
-    return np.quantile(level[lit], KEY_QUANTILE) * np.asarray(ratios)
+    envelope = _design(pixels) @ _least_squares(_design(pixels), level, lit)
+    return np.quantile(envelope[usable], KEY_QUANTILE) * np.asarray(ratios)
 
 
 def _channel_ratio(balanced: np.ndarray, level: np.ndarray, unclipped: np.ndarray, channel: int,
@@ -163,8 +173,7 @@ def _without_sheen(balanced: np.ndarray, pixels: SkinPixels, lit: np.ndarray) ->
     """``balanced`` [N, 3] less the skin's surface reflection of the ambient light, F0 A in every channel (module
     doc, item 4), A = ``SHEEN_AMBIENT``; none where the key light's envelope a0 + a . n over the ``lit`` pixels
     shows no ambient light (a0 <= 0: a hard light in a dark room) or no key light."""
-    design = np.concatenate([np.ones((int(lit.sum()), 1)), pixels.normals[lit]], 1)
-    coef = np.linalg.lstsq(design, balanced[lit, LEVEL_CHANNEL], rcond=None)[0]
+    coef = _least_squares(_design(pixels), balanced[:, LEVEL_CHANNEL], lit)
     if coef[0] <= 0 or np.linalg.norm(coef[1:]) <= 0:
         return balanced
     return np.maximum(balanced - SKIN_F0 * SHEEN_AMBIENT, 1e-6)
@@ -172,18 +181,35 @@ def _without_sheen(balanced: np.ndarray, pixels: SkinPixels, lit: np.ndarray) ->
 
 def _key_lit(level: np.ndarray, pixels: SkinPixels, usable: np.ndarray, refits: int = 5) -> np.ndarray:
     """[N] bool: usable pixels on the key light's upper envelope over the normals, highlights left out."""
-    design = np.concatenate([np.ones((len(level), 1)), pixels.normals], 1)
+    design = _design(pixels)
     candidates = usable & (level >= 0.5 * np.quantile(level[usable], KEY_QUANTILE))
-    lit = candidates
-    for step in range(refits + 2):
+    if candidates.sum() < 4:
+        return candidates
+    coef = _upper_envelope(design[candidates], level[candidates])
+    for _ in range(refits + 1):
+        ratio = level / np.maximum(design @ coef, 1e-6)
+        lit = candidates & (ratio > LIT_BAND[0]) & (ratio < LIT_BAND[1]) & ~_highlight(coef[1:], pixels)
         if lit.sum() < 4:
             return lit
-        coef = np.linalg.lstsq(design[lit], level[lit], rcond=None)[0]
-        if step >= refits:  # the last fits leave out the highlight of the light found so far
-            candidates = candidates & ~_highlight(coef[1:], pixels)
-        ratio = level / np.maximum(design @ coef, 1e-6)
-        lit = candidates & (ratio > LIT_BAND[0]) & (ratio < LIT_BAND[1])
-    return lit & ~_highlight(coef[1:], pixels)
+        coef = _least_squares(design, level, lit)
+    return lit
+
+
+def _design(pixels: SkinPixels) -> np.ndarray:
+    """[N, 4]: 1 and the normal, the envelope a0 + a . n's regressors."""
+    return np.concatenate([np.ones((len(pixels.normals), 1)), pixels.normals], 1)
+
+
+def _least_squares(design: np.ndarray, level: np.ndarray, chosen: np.ndarray) -> np.ndarray:
+    """[4]: the envelope fitted to the ``chosen`` pixels."""
+    return np.linalg.lstsq(design[chosen], level[chosen], rcond=None)[0]
+
+
+def _upper_envelope(design: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """[4]: the ``ENVELOPE_QUANTILE`` quantile regression of ``level`` on ``design`` (exact, by linear
+    programming)."""
+    regression = QuantileRegressor(quantile=ENVELOPE_QUANTILE, alpha=0.0, fit_intercept=False, solver="highs")
+    return regression.fit(design, level).coef_
 
 
 def _highlight(direction: np.ndarray, pixels: SkinPixels) -> np.ndarray:
