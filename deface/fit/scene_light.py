@@ -24,7 +24,9 @@ whole face, not only the measured regions:
    level on the normals (a shadow only darkens, so the lit skin is the top of the cloud even when the shadow
    covers most of it, and where it falls on the brightest normals, a brim over the forehead, it cannot tilt the
    envelope), then refitted by least squares to the pixels within ``LIT_BAND`` of it: pixels in a cast or
-   attached shadow fall below the band and leave the fit;
+   attached shadow fall below the band and leave the fit. A quantile envelope that rises away from the camera
+   describes no light in front of the face: the top of the cloud is then something else (a grey beard mixed
+   with skin along the jaw, a frontal skin clipped in green), and the envelope starts from least squares;
 3. no highlights: pixels whose normal is within ``HIGHLIGHT_COS`` of the half vector between the key light
    (a / |a|) and the camera are left out;
 4. no sheen: skin is a dielectric whose surface reflects a share of every light in the light's own colour
@@ -188,6 +190,9 @@ def _key_lit(level: np.ndarray, pixels: SkinPixels, usable: np.ndarray, refits: 
     if candidates.sum() < 4:
         return candidates
     coef = _upper_envelope(design[candidates], level[candidates])
+    if coef[1:] @ pixels.to_camera[candidates].mean(0) <= 0:
+        # brighter away from the camera: no light in front of the face; the top of the cloud is something else
+        coef = _least_squares(design, level, candidates)
     for _ in range(refits + 1):
         ratio = level / np.maximum(design @ coef, 1e-6)
         lit = candidates & (ratio > LIT_BAND[0]) & (ratio < LIT_BAND[1]) & ~_highlight(coef[1:], pixels)
