@@ -43,7 +43,7 @@ whole face, not only the measured regions:
    quantile the scene-light level term holds the key light's white response to on the face (so start and prior
    agree). It is read from the envelope, not from the lit pixels themselves, so that it does not depend on which
    normals a shadow leaves lit (a brim over the forehead takes the skin facing the key light out of the lit
-   pixels, and their own 90th percentile then reads a darker skin: shadow pairs' start ITA gap 4.6 -> 3.5,
+   pixels, and their own 90th percentile then reads a darker skin: shadow pairs' start ITA gap 4.6 -> 2.8,
    BENCHMARKS.md). Green because a skin's red clips first and its blue is the noisiest; the colour: each
    channel's median ratio to green over the lit pixels where that channel is not clipped.
 """
@@ -143,7 +143,8 @@ def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
     ratios = [_channel_ratio(balanced, level, unclipped[:, c], c, (lit, usable)) for c in range(3)]
     if not np.all(np.isfinite(ratios)):
         return None
-    envelope = _design(pixels) @ _least_squares(_design(pixels), level, lit)
+    design = _design(pixels)
+    envelope = design @ _least_squares(design, level, lit)
     return np.quantile(envelope[usable], KEY_QUANTILE) * np.asarray(ratios)
 
 
