@@ -100,6 +100,17 @@ def test_without_the_scene_light_prior_the_tones_collapse(neutral_fits):
     assert abs(held - 0.0) < abs(free - 0.0), (held, free)
 
 
+@pytest.mark.slow
+def test_stage2_leaves_the_tone_to_the_tone_axis(neutral_fits):
+    """T^0's tone is the one the axis alone gives at the fitted tone: the albedo coefficients did not move it
+    (deface/models/tone_neutral.py). Runs before the flat-cost test, which moves the fits' tone."""
+    for state in neutral_fits.values():
+        albedo, tone = state.context.model.albedo, state.context.scene.tone.detach()
+        axis_only, _ = albedo.textures(torch.zeros(albedo.num_coeffs), 128, tone)
+        fitted = texture_ita(linear_to_srgb(state.stage3.initial.diffuse.numpy().clip(0, 1)))
+        assert fitted == pytest.approx(texture_ita(linear_to_srgb(axis_only.numpy())), abs=1.0)
+
+
 def test_prior_cost_is_flat_over_tone(neutral_fits):
     """Stage 2's terms other than the photometric one do not change with the tone."""
     context = neutral_fits[0.0].context

@@ -202,6 +202,11 @@ class ToneConfig:
     light under the scene's white level (deface/fit/scene_light.py). ``deface`` uses 0: the tone trades freely
     against the key light's level, and on the renders of known albedo stage 2 moved good starts by up to 23
     degrees (a brim's shadow taken for darker skin, a warm light's clipped red for lighter; BENCHMARKS.md)."""
+    neutral_albedo: bool = True
+    """With a free tone, the albedo coefficients are projected after each stage-2 step so that they leave the
+    skin's ITA over the cheeks and forehead where the tone axis puts it (deface/models/tone_neutral.py): the tone
+    axis alone carries the tone, the other components what is not tone. Off: their constant melanin and
+    brightness terms trade the tone against the key light's level (several degrees from the start)."""
     ita_range: tuple[float, float] = (-50.0, 72.0)
     """Where the tone's flat prior is (degrees of ITA): human skin, from the darkest skins measured (about -50;
     Del Bino et al. 2006's dark group is below -30) to the lightest (about 70; their very light group is above

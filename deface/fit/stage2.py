@@ -17,6 +17,7 @@ from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.losses import decouple as decouple_losses
+from deface.models.tone_neutral import ToneBoxColours, keep_tone_
 
 
 @dataclass(frozen=True)
@@ -36,6 +37,8 @@ def run_stage2(context: StageContext) -> Stage2Result:
     history, term_history = [], []
     ace_at = min(config.decouple.ace_iteration, config.iterations.stage2 - 1)
     coarse_steps, coarse = _coarse_level(context)
+    tone_boxes = (ToneBoxColours.of(context.model.albedo) if config.tone.free_tone and config.tone.neutral_albedo
+                  else None)
     for step in range(config.iterations.stage2):
         level = coarse if step < coarse_steps else context
         if step == ace_at and decoupling.light_field is not None:
@@ -49,6 +52,8 @@ def run_stage2(context: StageContext) -> Stage2Result:
         scene.clamp_(context.model.expression_prior)
         if config.tone.free_tone:
             context.model.albedo.tone.clamp_(scene.tone, config.tone.ita_range)
+        if tone_boxes is not None:
+            keep_tone_(scene.albedo, tone_boxes, context.model.albedo.tone.scale(scene.tone.detach()))
         guard.check(loss)
         value = float(loss.detach())
         history.append(value)
