@@ -21,6 +21,7 @@ from deface.fit.stage2 import _stage2_loss
 from deface.fit.target import FitTarget
 from deface.io.images import linear_to_srgb
 from deface.losses.illuminant import front_directions, peak_white
+from deface.losses.texture import smooth_departure
 from deface.models import load_face_model
 from deface.models.ita import texture_ita
 from deface.priors.illuminant import planckian_rgb
@@ -38,9 +39,10 @@ def skin_lab(ita: float, radius: float = 19.0, a_star: float = 13.0) -> np.ndarr
     return np.array([50 + radius * np.sin(angle), a_star, radius * np.cos(angle)])
 
 
-def render_scene(ita: float, cct: float, size: int = 96):
+def render_scene(ita: float, cct: float, size: int = 96, shading: np.ndarray | None = None):
     """sRGB image and exact landmarks of the mean ICT face with a uniform skin of tone ``ita`` (plus the
-    prior's region pattern) under a Planckian light of ``cct`` in a grey room."""
+    prior's region pattern) under a Planckian light of ``cct`` in a grey room; ``shading`` [size, size]
+    multiplies the face (shading the lights cannot draw)."""
     model = load_face_model("ict")
     renderer = Renderer(RenderConfig(shadow_rays=48))
     face = Mesh.create(model.mean_shape, model.triangles, model.uvs, model.triangle_uvs)
@@ -59,12 +61,13 @@ def render_scene(ita: float, cct: float, size: int = 96):
                                 renderer.shadow_transfer(face))
     white = peak_white(light, front_directions())[0].numpy()
     coverage = output.mask.numpy()[..., None]
-    image = output.images[0].numpy() * coverage + WALL * white * (1 - coverage)
+    face_image = output.images[0].numpy() * (1.0 if shading is None else shading[..., None])
+    image = face_image * coverage + WALL * white * (1 - coverage)
     return linear_to_srgb(np.clip(image, 0, 1)), true_landmarks(model, face, camera)
 
 
-def fit_scene(ita: float, cct: float, preset: str = "deface", **changes):
-    image, landmarks = render_scene(ita, cct)
+def fit_scene(ita: float, cct: float, preset: str = "deface", shading: np.ndarray | None = None, **changes):
+    image, landmarks = render_scene(ita, cct, shading=shading)
     config = override(presets.get(preset), **{**SHORT, **changes})
     return run_stages(FitTarget([image], [landmarks], 1.0), config, log=FitLog(quiet=True))
 
@@ -146,3 +149,20 @@ def test_a_grayscale_photo_keeps_the_model_mean_tone_and_says_so(shared):
     model_tone = context.model.albedo.tone.reference_ita
     assert float(context.face.scene.tone) == pytest.approx(model_tone)
     assert any("grayscale" in note for note in log.notes)
+
+
+@pytest.mark.slow
+def test_stage3_leaves_smooth_unmodelled_shading_out_of_the_texture(shared):
+    """A smooth darkening towards the chin that no light draws: with ``smooth_departure`` the diffuse map keeps
+    T^0's smooth structure instead of taking the shading in (docs/textures.md)."""
+    rows = np.linspace(0.0, 1.0, 96)[:, None] * np.ones((1, 96))
+    shading = 1.0 - 0.35 * rows**2
+    departures = {}
+    for weight in (0.0, presets.SMOOTH_DEPARTURE):
+        state = fit_scene(30.0, 6504.0, shading=shading, **{"weights.smooth_departure": weight})
+        initial, fitted = state.stage3.initial.diffuse, state.stage3.textures.diffuse  # before completion
+        mask = torch.nn.functional.interpolate(torch.as_tensor(load_face_model("ict").albedo.face_mask,
+                                                               dtype=torch.float32)[None, None],
+                                               size=fitted.shape[:2], mode="bilinear")[0, 0]
+        departures[weight] = float(smooth_departure(fitted, initial, mask, 32))
+    assert departures[presets.SMOOTH_DEPARTURE] < 0.5 * departures[0.0]

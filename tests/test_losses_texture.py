@@ -10,6 +10,7 @@ from deface.losses.texture import (
     chromaticity,
     map_regulariser,
     neighbour_smoothness,
+    smooth_departure,
     texture_regularisers,
 )
 from deface.render.mesh import Textures
@@ -95,3 +96,46 @@ def test_all_maps_are_summed_and_gradients_reach_each_map():
                        torch.full((SIZE, SIZE, 1), 0.4))
     texture_regularisers(Textures(*maps), initial, ONES).backward()
     assert all(m.grad is not None and m.grad.abs().sum() > 0 for m in maps)
+
+
+def _cellwise_constant(cells: int, size: int, seed: int = 0) -> torch.Tensor:
+    """[size, size, 3] linear colours constant over each of cells x cells blocks."""
+    values = torch.rand(cells, cells, 3, generator=torch.Generator().manual_seed(seed)) * 0.5 + 0.1
+    return values.repeat_interleave(size // cells, 0).repeat_interleave(size // cells, 1)
+
+
+def test_smooth_departure_is_zero_for_the_reference_and_one_gain_per_channel():
+    reference, mask = _cellwise_constant(8, 64), torch.ones(64, 64)
+    assert float(smooth_departure(reference, reference, mask, 8)) == pytest.approx(0.0, abs=1e-12)
+    gained = reference * torch.tensor([1.4, 0.8, 1.1])  # the tone the photo shows stays free
+    assert float(smooth_departure(gained, reference, mask, 8)) == pytest.approx(0.0, abs=1e-10)
+
+
+def test_smooth_departure_ignores_detail_finer_than_a_cell():
+    reference, mask = _cellwise_constant(8, 64), torch.ones(64, 64)
+    checker = (torch.arange(64)[:, None] + torch.arange(64)[None, :]) % 2 * 2.0 - 1.0  # zero mean per cell
+    detailed = reference * (1.0 + 0.3 * checker)[..., None]
+    assert float(smooth_departure(detailed, reference, mask, 8)) == pytest.approx(0.0, abs=1e-10)
+
+
+def test_smooth_departure_of_a_shading_gradient_matches_its_variance_over_cells():
+    """T = T^0 exp(a y), y constant per cell row: the cost is a^2 times the variance of the rows' y."""
+    cells, size, slope = 8, 64, 0.3
+    reference, mask = _cellwise_constant(cells, size, seed=1), torch.ones(size, size)
+    row = (torch.arange(cells, dtype=torch.float64) + 0.5) / cells
+    y = row.repeat_interleave(size // cells)[:, None, None].float()
+    expected = slope**2 * float(row.var(unbiased=False))
+    assert float(smooth_departure(reference * torch.exp(slope * y), reference, mask, cells)) == \
+        pytest.approx(expected, rel=1e-4)
+
+
+def test_smooth_departure_leaves_out_cells_mostly_outside_the_face():
+    reference = _cellwise_constant(8, 64)
+    mask = torch.zeros(64, 64)
+    mask[:, :32] = 1.0
+    outside = reference.clone()
+    outside[:, 40:] *= 2.0  # a change off the face: no cost
+    assert float(smooth_departure(outside, reference, mask, 8)) == pytest.approx(0.0, abs=1e-10)
+    inside = reference.clone()
+    inside[:, :8] *= 2.0
+    assert float(smooth_departure(inside, reference, mask, 8)) > 0.05

@@ -20,7 +20,7 @@ from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.fit.texels import frame_views
 from deface.losses import decouple as decouple_losses
-from deface.losses.texture import texture_regularisers
+from deface.losses.texture import SmoothDeparture, texture_regularisers
 from deface.priors.global_prior import global_prior, kmeans_palette
 from deface.priors.local_prior import local_prior
 from deface.render.camera import Camera
@@ -127,12 +127,17 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
     """The stage-3 loss as a function of the textures; its texture-space constants are computed once."""
     palette, uv_mask = _palette(context, initial), _uv_mask(context, initial)
     texture_terms = _texture_terms_of(context, initial, palette, uv_mask)
+    weights = context.config.weights
+    smooth = SmoothDeparture(initial.diffuse, uv_mask, weights.smooth_departure_cells) \
+        if weights.smooth_departure else None
 
     def loss_of(textures: Textures, terms: LossTerms | None = None) -> torch.Tensor:
         terms = terms or LossTerms()
         loss = sum(_frame_loss(context, f, textures, human_prior, terms, 1.0 / len(frozen))
                    for f in frozen) / len(frozen)
         loss = loss + texture_terms(textures, terms)
+        if smooth is not None:
+            loss = loss + terms.add("smooth_departure", weights.smooth_departure * smooth(textures.diffuse))
         return loss + terms.add("scene_light_colour", context.scene_light_prior())
 
     return loss_of

@@ -94,3 +94,35 @@ def texture_regularisers(textures: Textures, initial: Textures, mask: torch.Tens
     for name, map_weights in weights.items():
         total = total + map_regulariser(getattr(textures, name), getattr(initial, name), mask, map_weights)
     return total
+
+
+
+class SmoothDeparture:
+    """Mean squared log departure of a diffuse map's low frequencies from T^0's beyond one gain per channel.
+
+    Both maps (linear, [Ht, Wt, 3]) are averaged over ``cells`` x ``cells`` blocks of the UV face (mask [Ht, Wt];
+    blocks under half covered are left out). The photos cannot tell a smooth change of albedo from a smooth
+    change of shading the lights do not model (soft shadow residue, occlusion), so such changes are left to T^0;
+    one overall gain per channel (the tone the photo shows) and everything finer than a block stay free. Every
+    channel counts: with the brightness alone held (the mean over channels), stage 3 drew dark brows and folds
+    with coloured fringes, a cheaper way to darken one channel. T^0's side is computed once."""
+
+    def __init__(self, reference: torch.Tensor, mask: torch.Tensor, cells: int):
+        self.mask, self.block = mask, reference.shape[0] // cells
+        cover = torch.nn.functional.avg_pool2d(mask[None, None], self.block)[0, 0]
+        self.used, self.cover = cover > 0.5, cover.clamp_min(1e-6)
+        self.log_reference = self._log_blocks(reference)
+
+    def _log_blocks(self, texture: torch.Tensor) -> torch.Tensor:  # [Ht, Wt, 3] -> [3, blocks used]
+        pooled = torch.nn.functional.avg_pool2d((texture * self.mask[..., None]).permute(2, 0, 1)[None],
+                                                 self.block)[0] / self.cover
+        return pooled.clamp_min(1e-4).log()[:, self.used]
+
+    def __call__(self, diffuse: torch.Tensor) -> torch.Tensor:
+        log_ratio = self._log_blocks(diffuse) - self.log_reference  # [3, blocks used]
+        return (log_ratio - log_ratio.mean(-1, keepdim=True)).pow(2).mean()
+
+
+def smooth_departure(diffuse: torch.Tensor, reference: torch.Tensor, mask: torch.Tensor, cells: int) -> torch.Tensor:
+    """:class:`SmoothDeparture` of ``diffuse`` from ``reference`` (one evaluation)."""
+    return SmoothDeparture(reference, mask, cells)(diffuse)
