@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 
@@ -139,3 +140,11 @@ def test_smooth_departure_leaves_out_cells_mostly_outside_the_face():
     inside = reference.clone()
     inside[:, :8] *= 2.0
     assert float(smooth_departure(inside, reference, mask, 8)) > 0.05
+
+
+def test_smooth_departure_of_a_map_smaller_than_the_cells_compares_texels():
+    reference, mask = _cellwise_constant(4, 16), torch.ones(16, 16)
+    darker = reference.clone()
+    darker[:8] *= 0.5
+    assert float(smooth_departure(darker, reference, mask, 32)) == pytest.approx(float(np.log(0.5) / 2) ** 2,
+                                                                                 rel=1e-4)

@@ -97,7 +97,7 @@ class Weights:
     """Scale of the stage-3 NextFace texture regularisers (deface/losses/texture.py; 0.2 in the authors' code)."""
     smooth_departure: float = 0.0
     """Stage 3: cost of the diffuse map's smooth departure from T^0 beyond one gain per channel
-    (deface/losses/texture.py, smooth_departure); 0 = off, as in the paper."""
+    (deface/losses/texture.py, SmoothDeparture); 0 = off, as in the paper."""
     smooth_departure_cells: int = 32
     """Cells per side over which smooth_departure compares the maps (256² maps: 8-texel blocks)."""
 

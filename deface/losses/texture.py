@@ -96,7 +96,6 @@ def texture_regularisers(textures: Textures, initial: Textures, mask: torch.Tens
     return total
 
 
-
 class SmoothDeparture:
     """Mean squared log departure of a diffuse map's low frequencies from T^0's beyond one gain per channel.
 
@@ -108,7 +107,7 @@ class SmoothDeparture:
     with coloured fringes, a cheaper way to darken one channel. T^0's side is computed once."""
 
     def __init__(self, reference: torch.Tensor, mask: torch.Tensor, cells: int):
-        self.mask, self.block = mask, reference.shape[0] // cells
+        self.mask, self.block = mask, max(1, reference.shape[0] // cells)  # maps under ``cells``: per texel
         cover = torch.nn.functional.avg_pool2d(mask[None, None], self.block)[0, 0]
         self.used, self.cover = cover > 0.5, cover.clamp_min(1e-6)
         self.log_reference = self._log_blocks(reference)
