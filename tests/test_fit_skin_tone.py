@@ -21,7 +21,7 @@ from deface.fit.stage2 import _stage2_loss
 from deface.fit.target import FitTarget
 from deface.io.images import linear_to_srgb
 from deface.losses.illuminant import front_directions, peak_white
-from deface.losses.texture import smooth_departure
+from deface.losses.texture import SmoothDeparture
 from deface.models import load_face_model
 from deface.models.ita import texture_ita
 from deface.priors.illuminant import planckian_rgb
@@ -164,5 +164,5 @@ def test_stage3_leaves_smooth_unmodelled_shading_out_of_the_texture(shared):
         mask = torch.nn.functional.interpolate(torch.as_tensor(load_face_model("ict").albedo.face_mask,
                                                                dtype=torch.float32)[None, None],
                                                size=fitted.shape[:2], mode="bilinear")[0, 0]
-        departures[weight] = float(smooth_departure(fitted, initial, mask, 32))
+        departures[weight] = float(SmoothDeparture(initial, mask, 32)(fitted))
     assert departures[presets.SMOOTH_DEPARTURE] < 0.5 * departures[0.0]

@@ -8,10 +8,10 @@ import torch
 
 from deface.losses.texture import (
     MapWeights,
+    SmoothDeparture,
     chromaticity,
     map_regulariser,
     neighbour_smoothness,
-    smooth_departure,
     texture_regularisers,
 )
 from deface.render.mesh import Textures
@@ -107,16 +107,16 @@ def _cellwise_constant(cells: int, size: int, seed: int = 0) -> torch.Tensor:
 
 def test_smooth_departure_is_zero_for_the_reference_and_one_gain_per_channel():
     reference, mask = _cellwise_constant(8, 64), torch.ones(64, 64)
-    assert float(smooth_departure(reference, reference, mask, 8)) == pytest.approx(0.0, abs=1e-12)
+    assert float(SmoothDeparture(reference, mask, 8)(reference)) == pytest.approx(0.0, abs=1e-12)
     gained = reference * torch.tensor([1.4, 0.8, 1.1])  # the tone the photo shows stays free
-    assert float(smooth_departure(gained, reference, mask, 8)) == pytest.approx(0.0, abs=1e-10)
+    assert float(SmoothDeparture(reference, mask, 8)(gained)) == pytest.approx(0.0, abs=1e-10)
 
 
 def test_smooth_departure_ignores_detail_finer_than_a_cell():
     reference, mask = _cellwise_constant(8, 64), torch.ones(64, 64)
     checker = (torch.arange(64)[:, None] + torch.arange(64)[None, :]) % 2 * 2.0 - 1.0  # zero mean per cell
     detailed = reference * (1.0 + 0.3 * checker)[..., None]
-    assert float(smooth_departure(detailed, reference, mask, 8)) == pytest.approx(0.0, abs=1e-10)
+    assert float(SmoothDeparture(reference, mask, 8)(detailed)) == pytest.approx(0.0, abs=1e-10)
 
 
 def test_smooth_departure_of_a_shading_gradient_matches_its_variance_over_cells():
@@ -126,7 +126,7 @@ def test_smooth_departure_of_a_shading_gradient_matches_its_variance_over_cells(
     row = (torch.arange(cells, dtype=torch.float64) + 0.5) / cells
     y = row.repeat_interleave(size // cells)[:, None, None].float()
     expected = slope**2 * float(row.var(unbiased=False))
-    assert float(smooth_departure(reference * torch.exp(slope * y), reference, mask, cells)) == \
+    assert float(SmoothDeparture(reference, mask, cells)(reference * torch.exp(slope * y))) == \
         pytest.approx(expected, rel=1e-4)
 
 
@@ -136,15 +136,15 @@ def test_smooth_departure_leaves_out_cells_mostly_outside_the_face():
     mask[:, :32] = 1.0
     outside = reference.clone()
     outside[:, 40:] *= 2.0  # a change off the face: no cost
-    assert float(smooth_departure(outside, reference, mask, 8)) == pytest.approx(0.0, abs=1e-10)
+    assert float(SmoothDeparture(reference, mask, 8)(outside)) == pytest.approx(0.0, abs=1e-10)
     inside = reference.clone()
     inside[:, :8] *= 2.0
-    assert float(smooth_departure(inside, reference, mask, 8)) > 0.05
+    assert float(SmoothDeparture(reference, mask, 8)(inside)) > 0.05
 
 
 def test_smooth_departure_of_a_map_smaller_than_the_cells_compares_texels():
     reference, mask = _cellwise_constant(4, 16), torch.ones(16, 16)
     darker = reference.clone()
     darker[:8] *= 0.5
-    assert float(smooth_departure(darker, reference, mask, 32)) == pytest.approx(float(np.log(0.5) / 2) ** 2,
+    assert float(SmoothDeparture(reference, mask, 32)(darker)) == pytest.approx(float(np.log(0.5) / 2) ** 2,
                                                                                  rel=1e-4)

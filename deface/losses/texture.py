@@ -121,7 +121,3 @@ class SmoothDeparture:
         log_ratio = self._log_blocks(diffuse) - self.log_reference  # [3, blocks used]
         return (log_ratio - log_ratio.mean(-1, keepdim=True)).pow(2).mean()
 
-
-def smooth_departure(diffuse: torch.Tensor, reference: torch.Tensor, mask: torch.Tensor, cells: int) -> torch.Tensor:
-    """:class:`SmoothDeparture` of ``diffuse`` from ``reference`` (one evaluation)."""
-    return SmoothDeparture(reference, mask, cells)(diffuse)
