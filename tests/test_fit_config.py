@@ -112,7 +112,8 @@ def test_command_line_order_preset_then_shortcuts_then_sets():
                                 iterations="5,6,9", priors="gp", seed=3)
     assert config.preset == "fast" and config.seed == 3
     assert config.lights.num_lights == 4 and config.iterations == type(config.iterations)(
-        5, 7, 9, stage3_tolerance=presets.STAGE3_TOLERANCE, stage2_coarse_share=presets.STAGE2_COARSE_SHARE)
+        5, 7, 9, stage3_tolerance=presets.STAGE3_TOLERANCE, stage2_coarse_share=presets.STAGE2_COARSE_SHARE,
+        stage3_holdout=presets.STAGE3_HOLDOUT)
     assert (config.priors.global_prior, config.priors.local_prior, config.priors.human_prior) == (True, False, False)
     assert options.fit_config() == presets.get("default")
     with pytest.raises(options.UsageError, match="--set resolution=x: resolution must be an integer"):

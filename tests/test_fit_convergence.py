@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from deface.fit import presets
@@ -28,7 +30,7 @@ def test_stages_stop_early_and_say_so(shadowed_small):
     image, landmarks, scale = shadowed_small
     config = override(presets.get("default"), **{
         "iterations.stage1": 20, "iterations.stage2": 40, "iterations.stage3": 30, "decouple.ace_iteration": 6,
-        "iterations.stage2_tolerance": 10.0, "iterations.stage3_tolerance": 10.0,
+        "iterations.stage2_tolerance": 10.0, "iterations.stage3_tolerance": 10.0, "iterations.stage3_holdout": 0.0,
         "iterations.convergence_window": 3, "resolution": 64, "texture_size": 64, "render.shadow_rays": 16})
     log = FitLog(quiet=True)
     fit_target(FitTarget([image], [landmarks], scale), config, log=log)
@@ -36,6 +38,22 @@ def test_stages_stop_early_and_say_so(shadowed_small):
     assert len(log.losses["stage 2"]) == 6 + 1 + 2 * 3
     assert len(log.losses["stage 3"]) == 2 * 3
     assert any("stage 3 converged after 6 of 30 steps" in note for note in log.notes)
+
+
+def test_stage3_keeps_the_step_that_predicts_the_held_out_pixels_best(shadowed_small):
+    image, landmarks, scale = shadowed_small
+    config = override(presets.get("default"), **{
+        "iterations.stage1": 20, "iterations.stage2": 20, "iterations.stage3": 60, "decouple.ace_iteration": 6,
+        "iterations.stage3_tolerance": 0.0, "iterations.stage3_holdout": 0.2, "iterations.convergence_window": 4,
+        "resolution": 64, "texture_size": 64, "render.shadow_rays": 16})
+    log = FitLog(quiet=True)
+    fit_target(FitTarget([image], [landmarks], scale), config, log=log)
+    kept = [note for note in log.notes if note.startswith("stage 3 keeps step")]
+    assert len(kept) == 1, log.notes
+    step, ran = (int(n) for n in re.match(r"stage 3 keeps step (\d+) of the (\d+) it ran", kept[0]).groups())
+    assert step < ran <= 60
+    if ran < 60:  # stopped by the held-out pixels: patience steps after the best one
+        assert ran == step + 4
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,8 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
                        "tone.learning_rate": presets.TONE_STEP,
                        "iterations.stage2_coarse_share": presets.STAGE2_COARSE_SHARE,
                        "learning_rates.stage3_diffuse_level": presets.DIFFUSE_STEP_LEVEL,
-                       "weights.smooth_departure": presets.SMOOTH_DEPARTURE}
+                       "weights.smooth_departure": presets.SMOOTH_DEPARTURE,
+                       "iterations.stage3_holdout": presets.STAGE3_HOLDOUT}
 
 
 def test_mean_skin_is_deface_without_the_skin_tone_work():
@@ -32,7 +33,7 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
     assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False,
                        "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3,
                        "iterations.stage2_coarse_share": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
-                       "weights.smooth_departure": 0.0}
+                       "weights.smooth_departure": 0.0, "iterations.stage3_holdout": 0.0}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():
@@ -42,6 +43,7 @@ def test_baselines_keep_the_model_mean_skin_and_free_lights():
         tone = presets.get(name).tone
         assert not tone.free_tone and not tone.scene_light_prior, name
         assert presets.get(name).weights.smooth_departure == 0.0, name
+        assert presets.get(name).iterations.stage3_holdout == 0.0, name
 
 
 def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():

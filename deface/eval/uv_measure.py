@@ -39,15 +39,22 @@ def uv_consistency(diffuse_a: np.ndarray, diffuse_b: np.ndarray, region: np.ndar
     return score_images(diffuse_a, diffuse_b, region.astype(np.float32))["face"]
 
 
-def relative_detail_energy(image: np.ndarray, region: np.ndarray, sigma: float = SPECKLE_SIGMA) -> float:
-    """E(X): mean over ``region`` of sum_c ((X - G X) / G X)², G a Gaussian taken within the region."""
+def relative_detail(image: np.ndarray, region: np.ndarray, sigma: float = SPECKLE_SIGMA) -> np.ndarray:
+    """[Ht, Wt, C]: (X - G X) / G X, G a Gaussian of ``sigma`` texels taken within ``region`` (normalised
+    convolution), so the region's edge is not detail."""
     weight = region.astype(np.float64)
     blurred_weight = ndimage.gaussian_filter(weight, sigma)
-    energy = np.zeros(image.shape[:2])
+    detail = np.zeros(image.shape)
     for channel in range(image.shape[-1]):
         values = image[..., channel].astype(np.float64) * weight
         local = ndimage.gaussian_filter(values, sigma) / np.maximum(blurred_weight, 1e-6)
-        energy += ((image[..., channel] - local) / np.maximum(local, 1e-3)) ** 2
+        detail[..., channel] = (image[..., channel] - local) / np.maximum(local, 1e-3)
+    return detail
+
+
+def relative_detail_energy(image: np.ndarray, region: np.ndarray, sigma: float = SPECKLE_SIGMA) -> float:
+    """E(X): mean over ``region`` (eroded by 2 texels) of sum_c ((X - G X) / G X)²."""
+    energy = (relative_detail(image, region, sigma) ** 2).sum(-1)
     inner = ndimage.binary_erosion(region, iterations=2)
     return float(energy[inner].mean()) if inner.sum() >= MIN_TEXELS else float("nan")
 

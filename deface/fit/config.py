@@ -124,6 +124,10 @@ class Iterations:
     (tested from ACE + 2 windows on). 0 = always run `stage2` steps."""
     stage3_tolerance: float = 0.0
     """The same early stop for stage 3 (tested from 2 windows on). 0 = always run `stage3` steps."""
+    stage3_holdout: float = 0.0
+    """Share of the face's pixels stage 3 holds out of the photometric term: it keeps the maps, lights and f of
+    the step that predicted them best and stops once `convergence_window` steps have not improved on it
+    (deface/fit/holdout.py: later steps fit colour noise, not the person). 0 = fit every pixel (the paper)."""
     convergence_window: int = 20
     """Steps per window of the early stops (window means smooth Adam's step-to-step noise)."""
 

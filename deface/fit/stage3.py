@@ -4,6 +4,8 @@ Geometry, g and M_o are frozen at their stage-2 values (authors' code), so each 
 its shadow transfer computed once. Optimised: diffuse, specular and roughness UV maps T (initialised from
 the albedo model, T^0), the kept lights gamma and f, with
     w0 L_pho + w4 L_bin + w5 L_GP + w6 L_LP + w7 L_HP + texture regularisers.
+With ``Iterations.stage3_holdout`` it fits the photometric term on all but a share of the pixels and keeps
+the step that predicts the held-out ones best (deface/fit/holdout.py).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import torch
 from deface.fit import fast_stage3
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
+from deface.fit.holdout import BestStep, HeldOutPixels
 from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.fit.texels import frame_views
@@ -101,13 +104,19 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     parameters = TextureParameters(initial, texture_gates(context, views, initial.diffuse.shape[0]))
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters, initial))
     guard = StepGuard(optimiser, "stage 3", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
-    loss_of = objective(context, frozen, initial, human_prior)
-    history, term_history, iterations = [], [], context.config.iterations
+    iterations = context.config.iterations
+    held_out = HeldOutPixels.draw([tuple(f.face_region.shape) for f in frozen], iterations.stage3_holdout) \
+        if iterations.stage3_holdout > 0 else None
+    best = BestStep(_optimised(context, parameters), iterations.convergence_window) if held_out else None
+    loss_of = objective(context, frozen, initial, human_prior, held_out)
+    history, term_history = [], []
     for step in range(iterations.stage3):
         optimiser.zero_grad(set_to_none=True)
-        terms = LossTerms()
-        loss = loss_of(parameters.textures(), terms)
+        terms, errors = LossTerms(), []
+        loss = loss_of(parameters.textures(), terms, errors)
         loss.backward()
+        if best is not None and best.update(step, sum(errors)):
+            break
         optimiser.step()
         guard.check(loss)
         value = float(loss.detach())
@@ -119,21 +128,41 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
             context.log.info(f"stage 3 converged after {step + 1} of {iterations.stage3} steps "
                              f"(tolerance {iterations.stage3_tolerance} per {iterations.convergence_window} steps)")
             break
+    if best is not None:
+        _keep_best(context, best, len(history))
     with torch.no_grad():
         return Stage3Result(parameters.textures(), initial, frozen, history, term_history, views)
 
 
-def objective(context: StageContext, frozen: list[FrozenFrame], initial: Textures, human_prior=None):
-    """The stage-3 loss as a function of the textures; its texture-space constants are computed once."""
+def _optimised(context: StageContext, parameters: TextureParameters) -> list[torch.Tensor]:
+    """Every tensor stage 3 optimises: the maps' pyramids, the kept lights' SH and f."""
+    tensors = list(parameters.parameters()) + [context.scene.lights]
+    if context.decoupling.light_field is not None:
+        tensors += list(context.decoupling.light_field.parameters())
+    return tensors
+
+
+def _keep_best(context: StageContext, best: BestStep, steps: int) -> None:
+    """Return to the step whose maps predicted the held-out pixels best, and say so."""
+    best.restore()
+    context.log.info(f"stage 3 keeps step {best.step} of the {steps} it ran: the held-out pixels' error was "
+                     f"lowest there ({context.config.iterations.stage3_holdout:.0%} of the face held out)")
+
+
+def objective(context: StageContext, frozen: list[FrozenFrame], initial: Textures, human_prior=None,
+              held_out: HeldOutPixels | None = None):
+    """The stage-3 loss as a function of the textures; its texture-space constants are computed once. With
+    ``held_out`` the photometric term fits the other pixels and each frame's error on the held-out ones is
+    appended to the ``errors`` list the loss is called with."""
     palette, uv_mask = _palette(context, initial), _uv_mask(context, initial)
     texture_terms = _texture_terms_of(context, initial, palette, uv_mask)
     weights = context.config.weights
     smooth = SmoothDeparture(initial.diffuse, uv_mask, weights.smooth_departure_cells) \
         if weights.smooth_departure else None
 
-    def loss_of(textures: Textures, terms: LossTerms | None = None) -> torch.Tensor:
+    def loss_of(textures: Textures, terms: LossTerms | None = None, errors: list | None = None) -> torch.Tensor:
         terms = terms or LossTerms()
-        loss = sum(_frame_loss(context, f, textures, human_prior, terms, 1.0 / len(frozen))
+        loss = sum(_frame_loss(context, f, textures, human_prior, terms, 1.0 / len(frozen), held_out, errors)
                    for f in frozen) / len(frozen)
         loss = loss + texture_terms(textures, terms)
         if smooth is not None:
@@ -212,10 +241,17 @@ def _parameter_groups(context: StageContext, parameters: TextureParameters, init
 
 
 def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, human_prior, terms: LossTerms,
-                scale: float) -> torch.Tensor:
+                scale: float, held_out: HeldOutPixels | None = None, errors: list | None = None) -> torch.Tensor:
     weights, priors, form = context.config.weights, context.config.priors, context.config.decouple.loss_form
     rendered, output = render_frozen(context, frame, textures)
-    loss = terms.add("photometric", weights.photometric * context.photometric(frame.index, rendered), scale)
+    fitted = rendered
+    if held_out is not None:
+        with torch.no_grad():
+            error = context.photometric(frame.index, held_out.scored(frame.index, rendered))
+        if errors is not None:
+            errors.append(float(error))
+        fitted = held_out.fitted(frame.index, rendered)
+    loss = terms.add("photometric", weights.photometric * context.photometric(frame.index, fitted), scale)
     loss = loss + terms.add("scene_light_level", context.key_light_exposure(frame.index, rendered), scale)
     if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         loss = loss + terms.add("binary", weights.binary * decouple_losses.binary_loss(
