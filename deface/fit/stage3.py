@@ -244,14 +244,8 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, h
                 scale: float, held_out: HeldOutPixels | None = None, errors: list | None = None) -> torch.Tensor:
     weights, priors, form = context.config.weights, context.config.priors, context.config.decouple.loss_form
     rendered, output = render_frozen(context, frame, textures)
-    fitted = rendered
-    if held_out is not None:
-        with torch.no_grad():
-            error = context.photometric(frame.index, held_out.scored(frame.index, rendered))
-        if errors is not None:
-            errors.append(float(error))
-        fitted = held_out.fitted(frame.index, rendered)
-    loss = terms.add("photometric", weights.photometric * context.photometric(frame.index, fitted), scale)
+    loss = terms.add("photometric", weights.photometric * _photometric(context, frame.index, rendered, held_out,
+                                                                       errors), scale)
     loss = loss + terms.add("scene_light_level", context.key_light_exposure(frame.index, rendered), scale)
     if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         loss = loss + terms.add("binary", weights.binary * decouple_losses.binary_loss(
@@ -263,6 +257,18 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, h
         loss = loss + terms.add("human_prior", weights.human_prior * human_prior(
             rendered.light_images, rendered.coverage), scale)
     return loss
+
+
+def _photometric(context: StageContext, frame: int, rendered: FrameRender, held_out: HeldOutPixels | None,
+                 errors: list | None) -> torch.Tensor:
+    """L_pho of a frame; with ``held_out``, over the fitted pixels, and the held-out ones' error appended to
+    ``errors``."""
+    if held_out is None:
+        return context.photometric(frame, rendered)
+    if errors is not None:
+        with torch.no_grad():
+            errors.append(float(context.photometric(frame, held_out.scored(frame, rendered))))
+    return context.photometric(frame, held_out.fitted(frame, rendered))
 
 
 def _local_prior(output: RenderOutput, reference: AlbedoReference, coverage: torch.Tensor,
