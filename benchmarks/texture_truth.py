@@ -19,33 +19,25 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 from scipy import ndimage
 
+from deface.eval.metrics import psnr
 from deface.eval.uv_measure import relative_detail
-from deface.io.images import srgb_to_linear
+from deface.io.images import load_image, srgb_to_linear
 from deface.paths import shared_dir
 
 SCALES = (1.0, 2.0)
 
 
-def _read(path: Path, mode: str = "RGB") -> np.ndarray:
-    return np.asarray(Image.open(path).convert(mode), dtype=np.float64) / 255.0
-
-
-def _psnr(a: np.ndarray, b: np.ndarray) -> float:
-    return float(10 * np.log10(1.0 / np.mean((a - b) ** 2)))
-
-
 def compare(fit_dir: Path, truth: np.ndarray, threshold: float) -> list[float]:
     """[psnr, gain-matched psnr, then per scale: amplitude, correlation, rest x100] of one fit."""
-    fitted = _read(fit_dir / "textures" / "diffuse.png")
-    region = _read(fit_dir / "textures" / "confidence.png", "L") >= threshold
+    fitted = load_image(fit_dir / "textures" / "diffuse.png").astype(np.float64)
+    region = load_image(fit_dir / "textures" / "confidence.png")[..., 0] >= threshold
     inner = ndimage.binary_erosion(region, iterations=3)
     fitted_linear, truth_linear = srgb_to_linear(fitted), srgb_to_linear(truth)
     gain = np.median(truth_linear[inner], 0) / np.median(fitted_linear[inner], 0)
     matched = np.clip(fitted_linear * gain, 0, 1) ** (1 / 2.2)
-    row = [_psnr(fitted[inner], truth[inner]), _psnr(matched[inner], truth_linear[inner] ** (1 / 2.2))]
+    row = [psnr(fitted, truth, inner), psnr(matched, truth_linear ** (1 / 2.2), inner)]
     for sigma in SCALES:
         mine = relative_detail(fitted_linear, region, sigma)[inner]
         true = relative_detail(truth_linear, region, sigma)[inner]
@@ -66,7 +58,8 @@ def main() -> None:
     header = "psnr | gain-matched | " + " | ".join(f"amplitude {s:g} | correlation {s:g} | rest {s:g}" for s in SCALES)
     for run in args.runs:
         fits = sorted(p for p in (run / args.variant).iterdir() if (p / "textures" / "diffuse.png").exists())
-        rows = [compare(fit, _read(albedo / f"{fit.name.split('_')[0]}.png"), args.confidence) for fit in fits]
+        rows = [compare(fit, load_image(albedo / f"{fit.name.split('_')[0]}.png").astype(np.float64), args.confidence)
+                for fit in fits]
         print(f"{run} ({len(rows)} renders; {header})")
         for fit, row in zip(fits, rows):
             print(f"  {fit.name:18s} " + " ".join(f"{v:6.2f}" for v in row))
