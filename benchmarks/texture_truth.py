@@ -61,7 +61,7 @@ def main() -> None:
         rows = [compare(fit, load_image(albedo / f"{fit.name.split('_')[0]}.png").astype(np.float64), args.confidence)
                 for fit in fits]
         print(f"{run} ({len(rows)} renders; {header})")
-        for fit, row in zip(fits, rows):
+        for fit, row in zip(fits, rows, strict=True):
             print(f"  {fit.name:18s} " + " ".join(f"{v:6.2f}" for v in row))
         print(f"  {'mean':18s} " + " ".join(f"{v:6.2f}" for v in np.mean(rows, 0)))
 

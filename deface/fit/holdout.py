@@ -71,5 +71,5 @@ class BestStep:
     def restore(self) -> None:
         """Put the best step's values back into ``tensors``."""
         if self._copy is not None:
-            for tensor, value in zip(self.tensors, self._copy):
+            for tensor, value in zip(self.tensors, self._copy, strict=True):
                 tensor.copy_(value)
