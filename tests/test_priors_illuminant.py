@@ -17,7 +17,13 @@ from deface.losses.illuminant import (
     peak_white,
     white_response,
 )
-from deface.priors.illuminant import IlluminantConfig, estimate_illuminant, planckian_rgb, plausible_cct
+from deface.priors.illuminant import (
+    IlluminantConfig,
+    _scene_pixels,
+    estimate_illuminant,
+    planckian_rgb,
+    plausible_cct,
+)
 from deface.render.sh import sh_basis, white_light
 
 SIZE = 96
@@ -29,9 +35,10 @@ def face_mask() -> np.ndarray:
 
 
 def grey_world_scene(cct: float, level: float, seed: int = 0) -> np.ndarray:
-    """A room of neutral surfaces averaging 18 % under a Planckian light; the face is dark red (ignored)."""
+    """A room of neutral surfaces averaging 18 % under a Planckian light; the face is dark red (ignored). None
+    looks near white (a white patch would decide instead: tests below)."""
     rng = np.random.default_rng(seed)
-    reflectance = np.clip(rng.lognormal(np.log(0.16), 0.5, (SIZE, SIZE, 1)), 0.01, 0.9)
+    reflectance = np.clip(rng.lognormal(np.log(0.16), 0.5, (SIZE, SIZE, 1)), 0.01, 0.5 / max(level, 1.0))
     reflectance *= 0.18 / reflectance.mean()
     image = reflectance * level * planckian_rgb(cct)
     image[face_mask()] = [0.3, 0.02, 0.02]
@@ -75,6 +82,50 @@ def test_a_white_backdrop_sets_the_white_level():
     estimate = estimate_illuminant([linear_to_srgb(image)], [face_mask()])
     assert estimate.source == "white patch" and estimate.cct == pytest.approx(6000.0, rel=0.05)
     assert float(estimate.white.max()) == pytest.approx(0.9 / 0.9, rel=0.05)  # level / white reflectance
+
+
+def backdrop_with_white_object(share: float, level: float = 1.0) -> np.ndarray:
+    """A bright turquoise backdrop (60 % green reflectance: grey world would take the light for 3x stronger)
+    with a white object (90 %) covering ``share`` of the scene, under a neutral light of ``level``."""
+    image = np.zeros((SIZE, SIZE, 3)) + np.array([0.35, 0.6, 0.55]) * level
+    scene = np.flatnonzero(~face_mask().ravel())
+    rows = scene[: int(round(share * scene.size))]
+    image.reshape(-1, 3)[rows] = 0.9 * level
+    image[face_mask()] = [0.3, 0.15, 0.1]
+    return linear_to_srgb(np.clip(image, 0, 1))
+
+
+def luminance_of(white: np.ndarray) -> float:
+    return float(white @ np.array([0.2126, 0.7152, 0.0722]))
+
+
+def test_a_small_white_object_outweighs_a_bright_backdrops_grey_world():
+    """A white shirt over 3 % of the scene sets the level; without it the backdrop's grey world overestimates."""
+    with_shirt = estimate_illuminant([backdrop_with_white_object(0.03)], [face_mask()])
+    without = estimate_illuminant([backdrop_with_white_object(0.0)], [face_mask()])
+    assert with_shirt.source == "white patch" and without.source == "grey world"
+    assert luminance_of(with_shirt.white) == pytest.approx(1.0, abs=0.05)
+    assert luminance_of(without.white) > 1.4
+
+
+def test_a_white_patch_counts_less_the_smaller_it_is():
+    """Its log level is pulled towards the photo's white point (W = 1) by a weight falling with its share, and
+    below about 0.8 % of the scene the grey world is the surer."""
+    config = IlluminantConfig()
+    scene_size = len(_scene_pixels(np.zeros((SIZE, SIZE, 3)), face_mask(), config))
+    outside = int((~face_mask()).sum())
+    pulls = []
+    for share in (0.3, 0.1, 0.04, 0.015):
+        estimate = estimate_illuminant([backdrop_with_white_object(share, 0.9)], [face_mask()], config)
+        assert estimate.source == "white patch"
+        seen = min(round(share * outside) / scene_size, config.white_fraction)  # of the pixels the estimate reads
+        sigma = config.white_patch_sigma * math.sqrt(config.white_fraction / seen)
+        weight = sigma**-2 / (sigma**-2 + config.exposure_sigma**-2)
+        assert luminance_of(estimate.white) == pytest.approx(0.9**weight, rel=0.005)
+        pulls.append(luminance_of(estimate.white))
+    assert pulls == sorted(pulls)  # ever nearer 1 as the patch shrinks
+    tiny = estimate_illuminant([backdrop_with_white_object(0.006, 0.9)], [face_mask()], config)
+    assert tiny.source == "grey world"
 
 
 def test_a_coloured_wall_is_not_taken_for_a_coloured_light():
