@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from deface.io.images import linear_to_srgb
+from deface.io.images import LUMINANCE, linear_to_srgb
 from deface.losses.illuminant import (
     exposure_term,
     front_directions,
@@ -88,15 +88,14 @@ def backdrop_with_white_object(share: float, level: float = 1.0) -> np.ndarray:
     """A bright turquoise backdrop (60 % green reflectance: grey world would take the light for 3x stronger)
     with a white object (90 %) covering ``share`` of the scene, under a neutral light of ``level``."""
     image = np.zeros((SIZE, SIZE, 3)) + np.array([0.35, 0.6, 0.55]) * level
-    scene = np.flatnonzero(~face_mask().ravel())
-    rows = scene[: int(round(share * scene.size))]
-    image.reshape(-1, 3)[rows] = 0.9 * level
+    outside_face = np.flatnonzero(~face_mask().ravel())
+    image.reshape(-1, 3)[outside_face[: int(round(share * outside_face.size))]] = 0.9 * level
     image[face_mask()] = [0.3, 0.15, 0.1]
     return linear_to_srgb(np.clip(image, 0, 1))
 
 
 def luminance_of(white: np.ndarray) -> float:
-    return float(white @ np.array([0.2126, 0.7152, 0.0722]))
+    return float(white @ LUMINANCE)
 
 
 def test_a_small_white_object_outweighs_a_bright_backdrops_grey_world():

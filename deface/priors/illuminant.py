@@ -13,7 +13,7 @@ pixels are left out. Evidence, in order:
   show a white surface: their median colour divided by ``white_reflectance`` is W (clipped pixels count as
   1.0 here: the photo's white point). A patch of ``white_fraction`` of the scene or more is trusted with
   ``white_patch_sigma``; a smaller one (a white shirt, a strip of wall) less, and it is used while it is
-  surer than the grey world (down to about 1 % of the scene).
+  surer than the grey world (down to about 0.8 % of the scene).
 - **Grey world** otherwise (Buchsbaum 1980): the scene averages to ``scene_reflectance`` (18 %, the
   photographic mid-grey), so W's luminance is the mean luminance over ``scene_reflectance``, never below the
   99th percentile of the scene (no diffuse surface reflects more than white). The colour is the
@@ -51,7 +51,7 @@ class IlluminantConfig:
     dark: float = 0.02
     """Pixels with linear luminance below this are left out (no colour to read)."""
     white_threshold: float = 0.85
-    """sRGB: a pixel whose every channel reaches this (or is clipped) is near white. A white wall under a
+    """sRGB: a pixel whose every channel reaches this is near white. A white wall under a
     strongly coloured light (below ~6000 K its blue channel falls under this) is read by grey world instead."""
     white_fraction: float = 0.1
     """Fraction of the scene near white at which the white patch has ``white_patch_sigma``; a smaller patch's
