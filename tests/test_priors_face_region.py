@@ -7,7 +7,14 @@ import pytest
 import torch
 
 from deface.priors.bisenet import FACE_CLASSES, BiSeNet, BiSeNetFaceParser, MissingWeightsError, parsing_box
-from deface.priors.face_region import SkinColourClassifier, _hull_mask, load_face_region_classifier
+from deface.priors.face_region import (
+    SkinColourClassifier,
+    _hull_mask,
+    _mahalanobis,
+    chromaticity,
+    clipped_chroma_distance,
+    load_face_region_classifier,
+)
 
 SKIN = np.array([0.85, 0.64, 0.53])
 HAIR = np.array([0.30, 0.20, 0.10])
@@ -51,6 +58,34 @@ def test_skin_classifier_accepts_torch_and_feature_masks():
     assert h[hair & (features == 0)].mean() < 0.3
     with pytest.raises(ValueError):
         SkinColourClassifier()(image, np.zeros((96, 96)))
+
+
+def test_clipped_chroma_distance_is_the_closest_value_the_clipped_channels_could_have():
+    mean, precision = chromaticity(SKIN**2.2), np.linalg.inv(np.diag([0.015, 0.015]) ** 2)
+    rng = np.random.default_rng(0)
+    true = SKIN**2.2 * rng.uniform(1.0, 3.0, (200, 1))  # skin brighter than the encoding can hold
+    clipped = true > 0.9
+    shown = np.where(clipped, 0.9, true)
+    assert clipped[:, 0].any() and (clipped.sum(-1) == 2).any() and (~clipped.any(-1)).any()
+    distance = clipped_chroma_distance(shown, clipped, mean, precision)
+    plain = _mahalanobis(chromaticity(shown), mean, precision)
+    assert np.all(distance <= plain + 1e-9)  # raising nothing is one of the values tried
+    assert np.allclose(distance[~clipped.any(-1)], plain[~clipped.any(-1)])
+    assert distance.max() < 0.5 and np.median(plain[clipped.any(-1)]) > 3.5  # skin again, not skin as shown
+    # a clipped red raises r only: a yellow-green whose green/blue is far from skin's stays far at any red
+    cloth = np.array([[0.9, 0.7, 0.05]])
+    assert clipped_chroma_distance(cloth, np.array([[True, False, False]]), mean, precision)[0] > 5
+
+
+def test_skin_classifier_keeps_key_lit_skin_whose_red_is_clipped():
+    image, coverage, shadow, hair = synthetic_face(2)
+    key_lit = (coverage > 0) & ~shadow & ~hair & (np.arange(96)[None, :] >= 56)
+    image[key_lit] = np.clip(image[key_lit] * 1.25, 0, 1)  # red reaches the white point, green and blue do not
+    assert (image[key_lit][:, 0] >= 0.98).mean() > 0.9 and (image[key_lit][:, 1:] < 0.98).all()
+    h = SkinColourClassifier()(image, coverage)
+    inner = key_lit & (np.arange(96)[None, :] < 80)
+    assert h[inner].mean() > 0.9
+    assert h[hair].mean() < 0.2
 
 
 def _mediapipe_landmarks(image: np.ndarray) -> np.ndarray:

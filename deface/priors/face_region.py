@@ -14,8 +14,11 @@ are not available offline. The default here, :class:`SkinColourClassifier`, need
    robust core = region minus features, eroded, without near-black or clipped pixels, trimmed in two passes
    around the median. Chromaticity is unchanged when intensity is scaled, so a shadowed skin pixel keeps
    the chroma of lit skin (up to the colour of the shadow's ambient light, which the trimmed spread absorbs);
-4. h = logistic(threshold - Mahalanobis distance) inside the region; dark pixels, whose chroma is noise,
-   take the median of h around them; then a median filter, a morphological closing and opening of the
+4. h = logistic(threshold - Mahalanobis distance) inside the region. A pixel with one or two clipped channels
+   (the red of a light skin in a warm key light) only says those channels are at least what it shows: its
+   distance is the smallest over every value they may have had (:func:`clipped_chroma_distance`), so key-lit
+   skin stays face. Dark pixels, whose chroma is noise, and pixels clipped in every channel (a highlight, a
+   lamp) take the median of h around them; then a median filter, a morphological closing and opening of the
    binary part, and a small Gaussian blur.
 
 Limits: colour only. Hair, beards, hats or hands whose chroma is close to skin (blond or auburn hair, skin
@@ -136,6 +139,46 @@ def _robust_gaussian(samples: np.ndarray, trim_sigmas: float, floor: float) -> t
     return mean, covariance
 
 
+def _mahalanobis(chroma: np.ndarray, mean: np.ndarray, precision: np.ndarray) -> np.ndarray:
+    """[...] distance of chroma [..., 2] from a Gaussian's ``mean`` [2] with inverse covariance ``precision``."""
+    offset = chroma - mean
+    return np.sqrt(np.maximum(np.einsum("...i,ij,...j->...", offset, precision, offset), 0.0))
+
+
+CLIP_HEADROOM = 16.0
+"""Most a clipped channel's true value may exceed what the pixel shows (four stops)."""
+
+
+def clipped_chroma_distance(linear: np.ndarray, clipped: np.ndarray, mean: np.ndarray,
+                            precision: np.ndarray) -> np.ndarray:
+    """[N]: the smallest Mahalanobis distance from the skin model (``mean`` [2], ``precision`` [2, 2]) of pixels
+    ``linear`` [N, 3] whose ``clipped`` [N, 3] channels may have been any value from the one shown up to
+    ``CLIP_HEADROOM`` times it, each independently: a clipped channel is a lower bound, the others are exact, so
+    a pixel is skin when some value of its clipped channels gives skin's chroma."""
+    best = np.full(len(linear), np.inf)
+    for pattern in np.unique(clipped, axis=0):
+        chosen = np.flatnonzero((clipped == pattern).all(-1))
+        best[chosen] = _closest_over_clipped(linear[chosen], pattern, mean, precision)
+    return best
+
+
+def _closest_over_clipped(linear: np.ndarray, pattern: np.ndarray, mean: np.ndarray,
+                          precision: np.ndarray) -> np.ndarray:
+    """[N]: :func:`clipped_chroma_distance` for pixels clipped in the same channels ``pattern`` [3]: a grid of
+    factors, even in log space, then a finer grid around each pixel's best."""
+    step = np.log(CLIP_HEADROOM) / 24
+    logs, best = np.zeros(linear.shape), np.full(len(linear), np.inf)
+    for offsets in (np.arange(25) * step, np.linspace(-1.0, 1.0, 9) * step):
+        axes = [offsets if flag else np.zeros(1) for flag in pattern]
+        start = logs.copy()
+        for offset in np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3):
+            trial = np.clip(start + offset, 0.0, np.log(CLIP_HEADROOM))
+            distance = _mahalanobis(chromaticity(linear * np.exp(trial)), mean, precision)
+            better = distance < best
+            best, logs[better] = np.where(better, distance, best), trial[better]
+    return best
+
+
 class SkinColourClassifier:
     """Offline h: skin-chroma Gaussian fitted on the face itself, landmark features kept (see module doc)."""
 
@@ -170,7 +213,8 @@ class SkinColourClassifier:
 
         linear = srgb**2.2
         luma = linear @ LUMINANCE.astype(np.float32)
-        reliable = (luma > cfg.dark_luma) & (srgb.max(axis=-1) < cfg.bright_value)
+        clipped = srgb >= cfg.bright_value  # [H, W, 3]
+        reliable = (luma > cfg.dark_luma) & ~clipped.any(axis=-1)
         core = cv2.erode((region & ~feature).astype(np.uint8), _disk(round(cfg.core_erosion * diagonal)))
         core = core.astype(bool) & reliable
         if core.sum() < 20:  # tiny faces: fall back on the whole region
@@ -179,8 +223,11 @@ class SkinColourClassifier:
             raise ValueError("too few well-exposed skin pixels to fit a colour model")
         chroma = chromaticity(linear)
         mean, covariance = _robust_gaussian(chroma[core], cfg.trim_sigmas, cfg.chroma_floor)
-        offset = chroma - mean
-        distance = np.sqrt(np.einsum("...i,ij,...j->...", offset, np.linalg.inv(covariance), offset))
+        precision = np.linalg.inv(covariance)
+        distance = _mahalanobis(chroma, mean, precision)
+        partly = region & (luma > cfg.dark_luma) & clipped.any(axis=-1) & ~clipped.all(axis=-1)
+        distance[partly] = clipped_chroma_distance(linear[partly], clipped[partly], mean, precision)
+        reliable |= partly
         skin = 1.0 / (1.0 + np.exp((distance - cfg.threshold) / cfg.softness))
 
         size = max(3, int(round(cfg.smoothing * diagonal)) | 1)
