@@ -36,7 +36,7 @@ def levels(path: str) -> tuple[float | None, float | None, float, float]:
     linear = srgb_to_linear(pixels)
     luminance = linear @ LUMINANCE
     usable = (pixels.max(-1) < settings.clipped) & (luminance >= settings.dark)
-    grey = max(luminance[usable].mean() / settings.scene_reflectance, float(np.percentile(luminance[usable], 99)))
+    _, grey = illuminant.grey_world(linear[usable], settings)
     patch = illuminant._white_patch(pixels, linear, settings)
     white = float((pixels.min(-1) >= settings.white_threshold).mean())
     return (None, None, grey, white) if patch is None else (patch[1], patch[2], grey, white)

@@ -117,14 +117,21 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
         colour, level, sigma = patch
         source = "white patch"
     else:
-        colour = np.power(np.mean(linear[usable] ** config.minkowski_p, axis=0), 1.0 / config.minkowski_p)
-        level = max(float(luminance[usable].mean()) / config.scene_reflectance,
-                    float(np.percentile(luminance[usable], 99)))
+        colour, level = grey_world(linear[usable], config)
         sigma, source = config.grey_world_sigma, "grey world"
     cct, weight = plausible_cct(colour, config)
     level = _with_exposure_prior(level, sigma, config.exposure_sigma)
     return IlluminantEstimate(level * planckian_rgb(cct, config.neutral_cct), cct, source, weight,
                               int(usable.sum()))
+
+
+def grey_world(linear: np.ndarray, config: IlluminantConfig) -> tuple[np.ndarray, float]:
+    """(colour [3], level) of the usable scene pixels ``linear`` [N, 3]: the shades-of-grey colour and the mean
+    luminance over ``scene_reflectance``, never below the 99th percentile (module doc)."""
+    luminance = linear @ LUMINANCE
+    colour = np.power(np.mean(linear**config.minkowski_p, axis=0), 1.0 / config.minkowski_p)
+    level = max(float(luminance.mean()) / config.scene_reflectance, float(np.percentile(luminance, 99)))
+    return colour, level
 
 
 def _white_patch(pixels: np.ndarray, linear: np.ndarray, config: IlluminantConfig):
