@@ -7,7 +7,7 @@ import pytest
 import torch
 from skimage.color import lab2rgb
 
-from deface.eval.tone_benchmark import TonePhoto, read_manifest, summary
+from deface.eval.tone_benchmark import PROXY, TonePhoto, read_manifest, report_markdown, summary, with_proxy
 from deface.models.ita import (
     TONE_BOXES,
     in_tone_boxes,
@@ -124,3 +124,15 @@ def test_summary_figures_follow_their_definitions():
     assert all(np.isnan(v) for v in [*figures["group_speckle"].values(), *figures["group_detail"].values()])
     assert figures["slope"] == pytest.approx(0.0, abs=1e-9)
     assert figures["group_mae"]["dark"] == pytest.approx(55.0) and figures["bias"] > 15
+
+
+def test_proxy_is_scored_against_the_truth_only_where_it_is_known():
+    photos = [TonePhoto(f"p{i}.png", g, ita) for i, (g, ita) in enumerate((("dark", -10.0), ("light", 50.0)))]
+    fits = {"default": {"p0": {"albedo_ita": -8.0, "photo_ita": 5.0, "speckle": 0.1, "detail": 0.9},
+                        "p1": {"albedo_ita": 53.0, "photo_ita": 40.0, "speckle": 0.0, "detail": 0.8}}}
+    scored = with_proxy(photos, fits)
+    assert summary(photos, scored[PROXY])["group_mae"] == pytest.approx({"dark": 15.0, "light": 10.0})
+    section = report_markdown(photos, fits, "synthetic", "deface bench skin-tone ...")
+    assert f"| {PROXY} | 12.5 | 15.0 | 10.0 |" in section and "| p0.png | dark | -10.0 | -8.0 | 5.0 |" in section
+    real = [TonePhoto(p.file, p.group, None) for p in photos]
+    assert PROXY not in with_proxy(real, fits) and f"| {PROXY} |" not in report_markdown(real, fits, "photos", "...")

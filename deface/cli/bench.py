@@ -149,7 +149,15 @@ def skin_tone_command(
     from rich.console import Console
 
     from deface.eval.benchmark import SCHEDULES, update_benchmarks_md
-    from deface.eval.tone_benchmark import contact_sheet, read_manifest, report_markdown, run_tone_benchmark, summary
+    from deface.eval.tone_benchmark import (
+        PROXY,
+        contact_sheet,
+        read_manifest,
+        report_markdown,
+        run_tone_benchmark,
+        summary,
+        with_proxy,
+    )
     from deface.fit import presets
 
     console = Console(soft_wrap=True)
@@ -168,15 +176,16 @@ def skin_tone_command(
     section = report_markdown(photos, records, folder.resolve().name, command)
     (output / "report.md").write_text(section)
     (output / "results.json").write_text(json.dumps(
-        {v: {"summary": summary(photos, r), "photos": r} for v, r in records.items()}, indent=1))
+        {v: {"summary": summary(photos, r), "photos": r} for v, r in with_proxy(photos, records).items()}, indent=1))
     sheet = contact_sheet(folder, output, photos, list(records))
     if report is not None:
         update_benchmarks_md(report, section, key=f"skin-tone-{folder.resolve().name}")
-    for variant, recs in records.items():
+    for variant, recs in with_proxy(photos, records).items():
         s = summary(photos, recs)
         groups = ", ".join(f"{g} {v:.1f}" for g, v in s["group_mae"].items())
         speckles = ", ".join(f"{g} {v:.2f}" for g, v in s["group_speckle"].items())
         details = ", ".join(f"{g} {v:.2f}" for g, v in s["group_detail"].items())
+        texture = "" if variant == PROXY else f"; speckle {speckles}; detail {details}"
         console.print(f"{variant}: MAE {s['mae']:.1f}, groups {groups}, bias {s['bias']:.2f}, "
-                      f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}; speckle {speckles}; detail {details}")
+                      f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}{texture}")
     console.print(f"wrote {output / 'report.md'} and {sheet}")

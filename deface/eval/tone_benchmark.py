@@ -13,6 +13,10 @@ of albedo ITA on reference ITA (0: one tone for everybody; 1: the tone scale is 
 texture's speckle and detail per group (deface/eval/uv_measure.py: fine contrast beyond the photo's, and as a
 share of the photo's): a fit whose texel noise grows, or whose detail fades, as the skin darkens treats the
 groups unequally even when it keeps the tone.
+
+Where the truth is known, the proxy is scored against it too (:data:`PROXY`, :func:`with_proxy`): how far the
+photo's lit skin is from the albedo where that can be checked says how much of a photo set's error against the
+proxy is the proxy's own.
 """
 
 from __future__ import annotations
@@ -33,6 +37,8 @@ from deface.fit.config import FitConfig, override
 
 GROUP_ORDER = ("dark", "medium", "light")
 BASELINE = "nextface"
+PROXY = "photo's lit skin"
+"""The pseudo-variant whose "albedo" is the photo's lit-skin ITA: scored only where the truth is known."""
 
 
 @dataclass(frozen=True)
@@ -131,6 +137,17 @@ def reference_ita(photo: TonePhoto, record: dict) -> float:
     return photo.gt_ita if photo.gt_ita is not None else record["photo_ita"]
 
 
+def with_proxy(photos: list[TonePhoto], records: dict) -> dict:
+    """``records`` {variant: {stem: record}} plus :data:`PROXY` (the photo's lit-skin ITA taken as the albedo's)
+    when every photo's true ITA is known; the first variant's photo ITA is used (the fitted mesh locates it)."""
+    if not records or any(p.gt_ita is None for p in photos):
+        return records
+    first = next(iter(records.values()))
+    proxy = {p.stem: {"albedo_ita": first[p.stem]["photo_ita"], "photo_ita": first[p.stem]["photo_ita"]}
+             for p in photos}
+    return {**records, PROXY: proxy}
+
+
 def summary(photos: list[TonePhoto], records: dict) -> dict:
     """FAIR-style figures of one variant's records {stem: record}."""
     albedo = np.array([records[p.stem]["albedo_ita"] for p in photos])
@@ -166,8 +183,12 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
              " (docs/skin-tone.md). Bias = std of the groups' mean absolute errors; slope = regression slope of"
              " albedo ITA on the reference (1 keeps the tone scale, 0 gives everybody one tone). Speckle: the"
              " texture's fine contrast beyond the photo's, relative to its level, x100, mean per group (0 = none);"
-             " detail: its fine contrast as a share of the photo's (1 = all of it; docs/textures.md).",
-             ""]
+             " detail: its fine contrast as a share of the photo's (1 = all of it; docs/textures.md)."]
+    records = with_proxy(photos, records)
+    if PROXY in records:
+        lines[-1] += (f" The row \"{PROXY}\" is the reference photo sets use (a proxy) scored against the truth:"
+                      " how far it is from the albedo where that is known.")
+    lines.append("")
     groups = list(summary(photos, next(iter(records.values())))["group_mae"])
     lines += ["| variant | MAE | " + " | ".join(f"MAE {g}" for g in groups) + " | bias | Spearman | slope |"
               " mean signed | max error | " + " | ".join(f"speckle {g}" for g in groups) + " | "
@@ -178,9 +199,10 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
                     if np.isfinite(reference_ita(p, recs[p.stem])))
         cells = [f"{s['mae']:.1f}", *[f"{s['group_mae'][g]:.1f}" for g in groups], f"{s['bias']:.2f}",
                  f"{s['spearman']:.2f}", f"{s['slope']:.2f}", f"{s['mean_signed']:+.1f}", f"{worst:.1f}",
-                 *[f"{s['group_speckle'][g]:.2f}" for g in groups], *[f"{s['group_detail'][g]:.2f}" for g in groups]]
+                 *[_cell(s['group_speckle'][g]) for g in groups], *[_cell(s['group_detail'][g]) for g in groups]]
         lines.append(f"| {variant} | " + " | ".join(cells) + " |")
-    lines += ["", "| photo | group | reference | " + " | ".join(f"{v} albedo" for v in records) + " |",
+    lines += ["", "| photo | group | reference | " + " | ".join(v if v == PROXY else f"{v} albedo" for v in records)
+              + " |",
               "|---|---|---|" + "---|" * len(records)]
     for p in photos:
         reference = reference_ita(p, next(iter(records.values()))[p.stem])
@@ -188,6 +210,11 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
         lines.append(f"| {p.file} | {p.group} | {reference:.1f} | " + " | ".join(cells) + " |")
     lines.append(f"\n_Written {time.strftime('%Y-%m-%d %H:%M')}._")
     return "\n".join(lines) + "\n"
+
+
+def _cell(value: float) -> str:
+    """A texture measure for the table; "-" where there is no texture (the proxy)."""
+    return "-" if np.isnan(value) else f"{value:.2f}"
 
 
 def contact_sheet(folder: Path, out_dir: Path, photos: list[TonePhoto], variants: list[str], tile: int = 160):
