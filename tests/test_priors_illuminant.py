@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from deface.io.images import LUMINANCE, linear_to_srgb
+from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import (
     exposure_term,
     front_directions,
@@ -133,6 +133,39 @@ def test_a_coloured_wall_is_not_taken_for_a_coloured_light():
     estimate = estimate_illuminant([linear_to_srgb(image)], [face_mask()])
     assert estimate.colour_weight < 0.05
     assert estimate.cct == pytest.approx(6504.0, rel=0.05)
+
+
+def dim_room_behind_black(readable: float) -> np.ndarray:
+    """A dim room (grey world level 0.3) of which only ``readable`` of the scene is seen; the rest is a black
+    backdrop, too dark to read."""
+    image = srgb_to_linear(grey_world_scene(6504.0, 0.3))
+    outside = np.flatnonzero(~face_mask().ravel())
+    image.reshape(-1, 3)[outside[int(round(readable * outside.size)):]] = 0.002
+    return linear_to_srgb(image)
+
+
+def test_a_scene_mostly_too_dark_to_read_counts_less():
+    """The grey world of the few readable pixels is pulled towards the photo's white point the smaller their
+    share (its spread grows as 1 / sqrt(share)), reaching the fallback's W = 1 without a jump."""
+    config = IlluminantConfig()
+    levels = []
+    for readable in (1.0, 0.5, 0.2, 0.08):
+        image = dim_room_behind_black(readable)
+        estimate = estimate_illuminant([image], [face_mask()], config)
+        assert estimate.source == "grey world"
+        share = len(_readable(image, config)) / len(_scene_pixels(image, face_mask(), config))
+        sigma = config.grey_world_sigma / math.sqrt(share)
+        weight = sigma**-2 / (sigma**-2 + config.exposure_sigma**-2)
+        assert luminance_of(estimate.white) == pytest.approx(0.3**weight, rel=0.03)
+        levels.append(luminance_of(estimate.white))
+    assert levels == sorted(levels) and levels[-1] > 0.8  # ever nearer the fallback's 1 as less is readable
+    fallback = estimate_illuminant([dim_room_behind_black(0.02)], [face_mask()], config)
+    assert fallback.source == "fallback"
+
+
+def _readable(image: np.ndarray, config: IlluminantConfig) -> np.ndarray:
+    pixels = _scene_pixels(image, face_mask(), config)
+    return pixels[srgb_to_linear(pixels) @ LUMINANCE >= config.dark]
 
 
 def test_too_little_scene_falls_back_to_the_white_point():
