@@ -37,7 +37,7 @@ def levels(path: str) -> tuple[float | None, float | None, float, float]:
     luminance = linear @ LUMINANCE
     usable = (pixels.max(-1) < settings.clipped) & (luminance >= settings.dark)
     _, grey = illuminant.grey_world(linear[usable], settings)
-    patch = illuminant._white_patch(pixels, linear, settings.grey_world_sigma / np.sqrt(usable.mean()), settings)
+    patch = illuminant._white_patch(pixels, linear, illuminant.grey_world_spread(usable, settings), settings)
     white = float((pixels.min(-1) >= settings.white_threshold).mean())
     return (None, None, grey, white) if patch is None else (patch[1], patch[2], grey, white)
 

@@ -175,12 +175,13 @@ def skin_tone_command(
     command += "" if baseline else " --no-baseline"
     section = report_markdown(photos, records, folder.resolve().name, command)
     (output / "report.md").write_text(section)
+    scored = with_proxy(photos, records)
     (output / "results.json").write_text(json.dumps(
-        {v: {"summary": summary(photos, r), "photos": r} for v, r in with_proxy(photos, records).items()}, indent=1))
+        {v: {"summary": summary(photos, r), "photos": r} for v, r in scored.items()}, indent=1))
     sheet = contact_sheet(folder, output, photos, list(records))
     if report is not None:
         update_benchmarks_md(report, section, key=f"skin-tone-{folder.resolve().name}")
-    for variant, recs in with_proxy(photos, records).items():
+    for variant, recs in scored.items():
         s = summary(photos, recs)
         groups = ", ".join(f"{g} {v:.1f}" for g, v in s["group_mae"].items())
         speckles = ", ".join(f"{g} {v:.2f}" for g, v in s["group_speckle"].items())

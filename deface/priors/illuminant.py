@@ -121,7 +121,7 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
     usable = (pixels.max(-1) < config.clipped) & (luminance >= config.dark)
     if usable.sum() < config.min_scene_fraction * total:
         return IlluminantEstimate(np.ones(3), config.neutral_cct, "fallback", 0.0, int(usable.sum()))
-    grey_sigma = config.grey_world_sigma / np.sqrt(usable.mean())
+    grey_sigma = grey_world_spread(usable, config)
     patch = _white_patch(pixels, linear, grey_sigma, config)
     if patch is not None:
         colour, level, sigma = patch
@@ -142,6 +142,12 @@ def grey_world(linear: np.ndarray, config: IlluminantConfig) -> tuple[np.ndarray
     colour = np.power(np.mean(linear**config.minkowski_p, axis=0), 1.0 / config.minkowski_p)
     level = max(float(luminance.mean()) / config.scene_reflectance, float(np.percentile(luminance, 99)))
     return colour, level
+
+
+def grey_world_spread(usable: np.ndarray, config: IlluminantConfig) -> float:
+    """Log spread of the grey world's level read from the ``usable`` [N] bool scene pixels: ``grey_world_sigma``
+    over sqrt(their share) (module doc)."""
+    return config.grey_world_sigma / float(np.sqrt(usable.mean()))
 
 
 def _white_patch(pixels: np.ndarray, linear: np.ndarray, grey_sigma: float, config: IlluminantConfig):
