@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from deface.fit import fast_stage3
-from deface.losses.texture import texture_regularisers
+from deface.losses.texture import PAPER_WEIGHTS, texture_regularisers
 from deface.priors.global_prior import global_prior
 from deface.priors.local_prior import local_prior
 from deface.render import kernels
@@ -36,23 +36,25 @@ def _mask(height: int, width: int, seed: int, dtype=torch.float64) -> torch.Tens
     return torch.where(values < 0.3, torch.zeros_like(values), torch.where(values > 0.7, 1.0, values))
 
 
-def _reference(textures, initial, mask, palette, regulariser, prior):
-    loss = regulariser * texture_regularisers(textures, initial, mask)
+def _reference(textures, initial, mask, palette, regulariser, prior, map_weights=PAPER_WEIGHTS):
+    loss = regulariser * texture_regularisers(textures, initial, mask, map_weights)
     return loss + prior * global_prior(textures.diffuse, palette, mask) if palette is not None else loss
 
 
 @pytest.mark.parametrize("size", [9, 16])  # odd: a middle column that is its own mirror image
 @pytest.mark.parametrize("with_palette", [True, False])
-def test_texture_terms_match_reference(size, with_palette):
+@pytest.mark.parametrize("relative", [1.0, 3.7])  # stage 3's diffuse weights relative to a dark map's level
+def test_texture_terms_match_reference(size, with_palette, relative):
     initial, current = _maps(size, 0), _maps(size, 1)
     mask = _mask(size, size, 2)
     palette = torch.rand(16, 3, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
     palette = palette if with_palette else None
+    map_weights = dict(PAPER_WEIGHTS, diffuse=PAPER_WEIGHTS["diffuse"].relative(relative))
     parameters = [t.clone().requires_grad_() for t in _fields(current)]
-    fast = fast_stage3.TextureTerms(initial, mask, palette, 0.2, 2e3)(Textures(*parameters))
+    fast = fast_stage3.TextureTerms(initial, mask, palette, 0.2, 2e3, map_weights)(Textures(*parameters))
     fast_grads = torch.autograd.grad(3.0 * fast, parameters)
     reference_parameters = [t.clone().requires_grad_() for t in _fields(current)]
-    reference = _reference(Textures(*reference_parameters), initial, mask, palette, 0.2, 2e3)
+    reference = _reference(Textures(*reference_parameters), initial, mask, palette, 0.2, 2e3, map_weights)
     reference_grads = torch.autograd.grad(3.0 * reference, reference_parameters)
     assert fast.item() == pytest.approx(reference.item(), rel=1e-12)
     for got, want in zip(fast_grads, reference_grads, strict=True):

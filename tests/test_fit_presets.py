@@ -23,6 +23,7 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
                        "tone.learning_rate": presets.TONE_STEP,
                        "iterations.stage2_coarse_share": presets.STAGE2_COARSE_SHARE,
                        "learning_rates.stage3_diffuse_level": presets.DIFFUSE_STEP_LEVEL,
+                       "weights.diffuse_level": presets.DIFFUSE_STEP_LEVEL,
                        "weights.smooth_departure": presets.SMOOTH_DEPARTURE,
                        "iterations.stage3_holdout": presets.STAGE3_HOLDOUT}
 
@@ -33,7 +34,8 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
     assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False,
                        "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3,
                        "iterations.stage2_coarse_share": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
-                       "weights.smooth_departure": 0.0, "iterations.stage3_holdout": 0.0}
+                       "weights.smooth_departure": 0.0, "iterations.stage3_holdout": 0.0,
+                       "weights.diffuse_level": 0.0}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():

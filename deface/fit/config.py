@@ -100,6 +100,14 @@ class Weights:
     (deface/losses/texture.py, SmoothDeparture); 0 = off, as in the paper."""
     smooth_departure_cells: int = 32
     """Cells per side over which smooth_departure compares the maps (256² maps: 8-texel blocks)."""
+    diffuse_level: float = 0.0
+    """Stage 3: the diffuse map's level (median linear green of T^0 over the face) at which the diffuse map's
+    regularisers, GP and LP have their weights; they are then measured relative to T^0's own level (each weight
+    times this level over T^0's, to the power of the map in its term). 0 = absolute, as the paper's code.
+    The photo pays the same for the same relative change of albedo whatever the skin's level (a darker albedo
+    is lit by brighter lights), while an absolute L1 or L2 term costs a skin half as light a half or a quarter
+    as much: dark skins' maps were regularised several times less than light ones' (deface/fit/stage3.py
+    :func:`relative_scale`; ``learning_rates.stage3_diffuse_level`` does the same for the step)."""
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.fit.texels import frame_views
 from deface.losses import decouple as decouple_losses
-from deface.losses.texture import SmoothDeparture, texture_regularisers
+from deface.losses.texture import PAPER_WEIGHTS, SmoothDeparture, texture_regularisers
 from deface.priors.global_prior import global_prior, kmeans_palette
 from deface.priors.local_prior import local_prior
 from deface.render.camera import Camera
@@ -34,7 +34,7 @@ from deface.texture.confidence import TexelView
 from deface.texture.pyramid import TexturePyramid, level_gates, level_sizes
 
 MIN_LEVEL = 0.01
-"""Floor of the diffuse map's level in :func:`diffuse_step` (a darkest skin's green is about 0.03)."""
+"""Floor of the diffuse map's level in :func:`map_level` (a darkest skin's green is about 0.03)."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +57,15 @@ class FrozenFrame:
     transfer: ShadowTransfer | None  # the frame's shadow transfer (None without shadows)
     face_region: torch.Tensor  # [H, W] M_o from stage 2
     reference: AlbedoReference
+
+
+@dataclass(frozen=True)
+class FrameTerms:
+    """What stage 3's per-frame terms need besides the frame."""
+
+    human_prior: object | None  # HP's network (None: no HP)
+    held_out: HeldOutPixels | None  # pixels the photometric term leaves out and scores (None: none)
+    local_prior: tuple[float, float, float]  # LP's (diffuse, specular, roughness) weights, diffuse relative
 
 
 class TextureParameters(torch.nn.Module):
@@ -155,14 +164,17 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
     ``held_out`` the photometric term fits the other pixels and each frame's error on the held-out ones is
     appended to the ``errors`` list the loss is called with."""
     palette, uv_mask = _palette(context, initial), _uv_mask(context, initial)
-    texture_terms = _texture_terms_of(context, initial, palette, uv_mask)
     weights = context.config.weights
+    relative = relative_scale(weights, initial.diffuse, uv_mask)
+    texture_terms = _texture_terms_of(context, initial, palette, uv_mask, relative)
     smooth = SmoothDeparture(initial.diffuse, uv_mask, weights.smooth_departure_cells) \
         if weights.smooth_departure else None
+    diffuse, specular, roughness = context.config.priors.local_prior_weights
+    setup = FrameTerms(human_prior, held_out, (diffuse * relative, specular, roughness))
 
     def loss_of(textures: Textures, terms: LossTerms | None = None, errors: list | None = None) -> torch.Tensor:
         terms = terms or LossTerms()
-        loss = sum(_frame_loss(context, f, textures, human_prior, terms, 1.0 / len(frozen), held_out, errors)
+        loss = sum(_frame_loss(context, f, textures, setup, terms, 1.0 / len(frozen), errors)
                    for f in frozen) / len(frozen)
         loss = loss + texture_terms(textures, terms)
         if smooth is not None:
@@ -213,17 +225,32 @@ def _topology(context: StageContext):
     return topology["triangles"], topology["uvs"], topology["triangle_uvs"]
 
 
+def map_level(diffuse: torch.Tensor, uv_mask: torch.Tensor) -> float:
+    """A diffuse map's level: its median linear green [Ht, Wt, 3] over the face texels (``uv_mask`` [Ht, Wt]
+    > 0.5), at least MIN_LEVEL."""
+    face = uv_mask > 0.5
+    level = float(diffuse[face][:, 1].median()) if bool(face.any()) else 0.0
+    return max(level, MIN_LEVEL)
+
+
 def diffuse_step(rates, diffuse: torch.Tensor, uv_mask: torch.Tensor) -> float:
-    """Stage 3's Adam step for the diffuse map [Ht, Wt, 3] whose face texels are ``uv_mask`` [Ht, Wt] > 0.5:
-    ``rates.stage3_diffuse``, scaled by the map's level (median linear green over the face) over
+    """Stage 3's Adam step for the diffuse map: ``rates.stage3_diffuse``, scaled by the map's level over
     ``rates.stage3_diffuse_level`` when that is set (:class:`~deface.fit.config.LearningRates`). Adam's steps
     do not scale with the gradient, so with a step proportional to the map, a map and the same map times c
     (the same face, a darker skin) are refined alike up to the factor c."""
     if rates.stage3_diffuse_level <= 0:
         return rates.stage3_diffuse
-    face = uv_mask > 0.5
-    level = float(diffuse[face][:, 1].median()) if bool(face.any()) else 0.0
-    return rates.stage3_diffuse * max(level, MIN_LEVEL) / rates.stage3_diffuse_level
+    return rates.stage3_diffuse * map_level(diffuse, uv_mask) / rates.stage3_diffuse_level
+
+
+def relative_scale(weights, diffuse: torch.Tensor, uv_mask: torch.Tensor) -> float:
+    """``weights.diffuse_level`` over the diffuse map's level (1 when that is 0): the factor on the weights of
+    the diffuse map's degree-1 terms (its L1 regularisers, LP), squared on its degree-2 ones (smoothness, GP), so
+    that a map and the same map times c (the same face, a darker skin, under lights 1 / c as bright: the same
+    photo) cost alike (:class:`~deface.fit.config.Weights`)."""
+    if weights.diffuse_level <= 0:
+        return 1.0
+    return weights.diffuse_level / map_level(diffuse, uv_mask)
 
 
 def _parameter_groups(context: StageContext, parameters: TextureParameters, initial: Textures) -> list[dict]:
@@ -240,21 +267,21 @@ def _parameter_groups(context: StageContext, parameters: TextureParameters, init
     return groups
 
 
-def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, human_prior, terms: LossTerms,
-                scale: float, held_out: HeldOutPixels | None = None, errors: list | None = None) -> torch.Tensor:
+def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, setup: FrameTerms, terms: LossTerms,
+                scale: float, errors: list | None = None) -> torch.Tensor:
     weights, priors, form = context.config.weights, context.config.priors, context.config.decouple.loss_form
     rendered, output = render_frozen(context, frame, textures)
-    loss = terms.add("photometric", weights.photometric * _photometric(context, frame.index, rendered, held_out,
-                                                                       errors), scale)
+    loss = terms.add("photometric", weights.photometric * _photometric(context, frame.index, rendered,
+                                                                       setup.held_out, errors), scale)
     loss = loss + terms.add("scene_light_level", context.key_light_exposure(frame.index, rendered), scale)
     if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         loss = loss + terms.add("binary", weights.binary * decouple_losses.binary_loss(
             rendered.light_masks, rendered.coverage, form=form), scale)
     if priors.local_prior:
         loss = loss + terms.add("local_prior", weights.local_prior * _local_prior(
-            output, frame.reference, rendered.coverage, priors.local_prior_weights), scale)
-    if priors.human_prior and human_prior is not None:
-        loss = loss + terms.add("human_prior", weights.human_prior * human_prior(
+            output, frame.reference, rendered.coverage, setup.local_prior), scale)
+    if priors.human_prior and setup.human_prior is not None:
+        loss = loss + terms.add("human_prior", weights.human_prior * setup.human_prior(
             rendered.light_images, rendered.coverage), scale)
     return loss
 
@@ -297,24 +324,24 @@ def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:
     return torch.nn.functional.interpolate(mask[None, None], size=(size, size), mode="bilinear")[0, 0]
 
 
-def _texture_terms_of(context: StageContext, initial: Textures, palette, uv_mask):
-    """(textures, terms) -> the texture-space terms: the fused kernels (deface/fit/fast_stage3.py) on the CPU,
-    one named term for regularisers and GP together; else the torch reference :func:`_texture_terms`."""
+def _texture_terms_of(context: StageContext, initial: Textures, palette, uv_mask, relative: float):
+    """(textures, terms) -> the texture-space terms, the diffuse map's relative to its level (``relative``,
+    :func:`relative_scale`): the fused kernels (deface/fit/fast_stage3.py) on the CPU, one named term for
+    regularisers and GP together; else the torch reference (deface/losses/texture.py, GP)."""
     weights = context.config.weights
+    map_weights = dict(PAPER_WEIGHTS, diffuse=PAPER_WEIGHTS["diffuse"].relative(relative))
+    global_weight = weights.global_prior * relative ** 2  # GP is a squared distance
     if fast_stage3.enabled(initial.diffuse, initial.specular, initial.roughness, uv_mask):
-        fused = fast_stage3.TextureTerms(initial, uv_mask, palette, weights.texture_regulariser,
-                                         weights.global_prior)
+        fused = fast_stage3.TextureTerms(initial, uv_mask, palette, weights.texture_regulariser, global_weight,
+                                         map_weights)
         name = "texture_regularisers" if palette is None else "texture_regularisers_and_global_prior"
         return lambda textures, terms: terms.add(name, fused(textures))
-    return lambda textures, terms: _texture_terms(context, textures, initial, palette, uv_mask, terms)
 
+    def texture_terms(textures: Textures, terms: LossTerms) -> torch.Tensor:  # the torch reference
+        loss = terms.add("texture_regularisers", weights.texture_regulariser * texture_regularisers(
+            textures, initial, uv_mask, map_weights))
+        if palette is not None:
+            loss = loss + terms.add("global_prior", global_weight * global_prior(textures.diffuse, palette, uv_mask))
+        return loss
 
-def _texture_terms(context: StageContext, textures: Textures, initial: Textures, palette, uv_mask,
-                   terms: LossTerms) -> torch.Tensor:
-    weights = context.config.weights
-    loss = terms.add("texture_regularisers",
-                     weights.texture_regulariser * texture_regularisers(textures, initial, uv_mask))
-    if palette is not None:
-        loss = loss + terms.add("global_prior", weights.global_prior * global_prior(textures.diffuse, palette,
-                                                                                     uv_mask))
-    return loss
+    return texture_terms

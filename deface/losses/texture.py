@@ -16,7 +16,7 @@ The authors also penalise values outside [0, 1]; stage 3 clamps the maps instead
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -37,6 +37,14 @@ class MapWeights:
     chromaticity: float  # weight*ConsistencyReg (passed as the xy consistency weight)
     smoothness: float  # weight*SmoothnessReg
     grey: float = 0.0  # the mean-colour weight (0.5 for specular)
+
+    def relative(self, scale: float) -> MapWeights:
+        """The weights for a map measured in units of ``1 / scale`` (the map's level over a reference level): each
+        term is homogeneous in the map (degree 1: symmetry, reference; 2: smoothness, grey; 0: chromaticity, but
+        for the 1 that keeps black finite), so with these a map and ``1 / scale`` times it (T^0 and T alike)
+        cost the same."""
+        return replace(self, symmetry=self.symmetry * scale, reference=self.reference * scale,
+                       smoothness=self.smoothness * scale ** 2, grey=self.grey * scale ** 2)
 
 
 # The paper's code: diffuse 300/100/0.001, specular 200/2/0.001 with 0.5 grey, roughness 200/0/0.002.
