@@ -39,10 +39,10 @@ class MapWeights:
     grey: float = 0.0  # the mean-colour weight (0.5 for specular)
 
     def relative(self, scale: float) -> MapWeights:
-        """The weights for a map measured in units of ``1 / scale`` (the map's level over a reference level): each
-        term is homogeneous in the map (degree 1: symmetry, reference; 2: smoothness, grey; 0: chromaticity, but
-        for the 1 that keeps black finite), so with these a map and ``1 / scale`` times it (T^0 and T alike)
-        cost the same."""
+        """The weights for maps ``1 / scale`` times as bright (a reference level over the map's): each term is
+        homogeneous in the maps (degree 1: symmetry, reference; 2: smoothness, grey; 0: chromaticity, but for the
+        1 that keeps black finite), so T / scale against T^0 / scale costs with these what T against T^0 costs
+        with ``self``."""
         return replace(self, symmetry=self.symmetry * scale, reference=self.reference * scale,
                        smoothness=self.smoothness * scale ** 2, grey=self.grey * scale ** 2)
 
