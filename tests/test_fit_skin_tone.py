@@ -39,10 +39,11 @@ def skin_lab(ita: float, radius: float = 19.0, a_star: float = 13.0) -> np.ndarr
     return np.array([50 + radius * np.sin(angle), a_star, radius * np.cos(angle)])
 
 
-def render_scene(ita: float, cct: float, size: int = 96, shading: np.ndarray | None = None):
+def render_scene(ita: float, cct: float, size: int = 96, shading: np.ndarray | None = None, exposure: float = 1.0):
     """sRGB image and exact landmarks of the mean ICT face with a uniform skin of tone ``ita`` (plus the
-    prior's region pattern) under a Planckian light of ``cct`` in a grey room; ``shading`` [size, size]
-    multiplies the face (shading the lights cannot draw)."""
+    prior's region pattern) under a Planckian light of ``cct`` in a grey room, exposed so that a white surface
+    facing the light reads ``exposure`` times the white point; ``shading`` [size, size] multiplies the face
+    (shading the lights cannot draw)."""
     model = load_face_model("ict")
     renderer = Renderer(RenderConfig(shadow_rays=48))
     face = Mesh.create(model.mean_shape, model.triangles, model.uvs, model.triangle_uvs)
@@ -62,7 +63,7 @@ def render_scene(ita: float, cct: float, size: int = 96, shading: np.ndarray | N
     white = peak_white(light, front_directions())[0].numpy()
     coverage = output.mask.numpy()[..., None]
     face_image = output.images[0].numpy() * (1.0 if shading is None else shading[..., None])
-    image = face_image * coverage + WALL * white * (1 - coverage)
+    image = (face_image * coverage + WALL * white * (1 - coverage)) * exposure
     return linear_to_srgb(np.clip(image, 0, 1)), true_landmarks(model, face, camera)
 
 
@@ -149,6 +150,43 @@ def test_a_grayscale_photo_keeps_the_model_mean_tone_and_says_so(shared):
     model_tone = context.model.albedo.tone.reference_ita
     assert float(context.face.scene.tone) == pytest.approx(model_tone)
     assert any("grayscale" in note for note in log.notes)
+
+
+def test_a_reference_card_fixes_the_exposure_the_scene_cannot_tell(shared):
+    """A room lit 1.7 times brighter than the white point could be a paler room at the photo's exposure (the
+    grey world and the white point share the difference: W about 1.3), so the skin starts too light (ITA 42 for
+    30). The room's wall, of known reflectance, used as the reference card gives W = 1.7 and a start near the
+    skin's tone (27); ``white`` given as that W starts the same; and the start follows W as albedo = skin / W
+    must (a twice brighter W: a darker skin)."""
+    from deface.fit.pipeline import prepare
+
+    image, landmarks = render_scene(30.0, 6504.0, exposure=1.7)
+    target = FitTarget([image], [landmarks], 1.0)
+
+    def start(**settings):
+        log = FitLog(quiet=True)
+        context, _ = prepare(target, override(presets.get("deface"), **SHORT, **settings), log=log)
+        return float(context.face.scene.tone.detach()), next(n for n in log.notes if "scene illuminant" in n)
+
+    estimated, _ = start()
+    wall = {"tone.illuminant.reference_box": (0.0, 0.0, 0.15, 1.0), "tone.illuminant.reference_reflectance": WALL}
+    carded, note = start(**wall)
+    assert "reference card" in note and "1.7" in note
+    assert abs(carded - 30.0) < 8 and abs(carded - 30.0) < abs(estimated - 30.0) - 5, (carded, estimated)
+    given, note = start(**{"tone.illuminant.white": (1.7, 1.7, 1.7)})
+    assert "given" in note and given == pytest.approx(carded, abs=1.0)
+    brighter, _ = start(**{"tone.illuminant.white": (3.4, 3.4, 3.4)})
+    assert brighter < given - 10
+
+
+def test_a_white_level_a_preset_does_not_use_is_said_so(shared):
+    from deface.fit.pipeline import prepare
+
+    image, landmarks = render_scene(30.0, 6504.0)
+    log = FitLog(quiet=True)
+    config = override(presets.get("paper"), **SHORT, **{"tone.illuminant.white": (0.5, 0.5, 0.5)})
+    prepare(FitTarget([image], [landmarks], 1.0), config, log=log)
+    assert any("white level is not used" in note and "paper" in note for note in log.notes), log.notes
 
 
 @pytest.mark.slow

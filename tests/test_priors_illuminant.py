@@ -21,6 +21,7 @@ from deface.priors.illuminant import (
     IlluminantConfig,
     _scene_pixels,
     estimate_illuminant,
+    known_illuminant,
     planckian_rgb,
     plausible_cct,
 )
@@ -180,6 +181,48 @@ def test_clips_pool_their_frames():
     single = estimate_illuminant(frames[:1], [face_mask()])
     assert pooled.cct == pytest.approx(3500.0, rel=0.04)
     assert pooled.scene_pixels == pytest.approx(3 * single.scene_pixels, rel=0.02)
+
+
+def scene_with_card(cct: float, level: float, card: float = 0.18) -> np.ndarray:
+    """grey_world_scene with a card of reflectance ``card`` over its left tenth (the light's level and colour)."""
+    image = srgb_to_linear(grey_world_scene(cct, level))
+    image[:, : SIZE // 10] = card * level * planckian_rgb(cct)
+    return linear_to_srgb(np.clip(image, 0, 1))
+
+
+@pytest.mark.parametrize(("cct", "level"), [(2700.0, 0.6), (6504.0, 2.5), (9000.0, 0.4)])
+def test_a_reference_card_gives_the_lights_level_and_colour(cct, level):
+    """A grey card of known reflectance reads W itself, where the scene's grey world is pulled towards the photo's
+    white point; the clip's frames pool, and a box given as fractions does not depend on the image's size."""
+    config = IlluminantConfig(reference_box=(0.0, 0.2, 0.1, 0.8))
+    card = known_illuminant([scene_with_card(cct, level)], config)
+    truth = level * planckian_rgb(cct)
+    assert card.source == "reference card" and card.white == pytest.approx(truth, rel=0.02)
+    assert card.cct == pytest.approx(cct, rel=0.03)
+    scene = estimate_illuminant([scene_with_card(cct, level)], [face_mask()])
+    assert abs(np.log(luminance_of(card.white) / level)) < abs(np.log(luminance_of(scene.white) / level)) - 0.1
+    larger = np.repeat(np.repeat(scene_with_card(cct, level), 3, axis=0), 3, axis=1)
+    assert known_illuminant([larger, larger], config).white == pytest.approx(card.white, rel=1e-3)
+    white_paper = IlluminantConfig(reference_box=(0.0, 0.2, 0.1, 0.8), reference_reflectance=0.9)
+    assert known_illuminant([scene_with_card(cct, level / 5, 0.9)], white_paper).white == pytest.approx(
+        truth / 5, rel=0.02)
+
+
+def test_a_given_white_level_is_used_as_it_is():
+    given = known_illuminant([grey_world_scene(6504.0, 1.0)], IlluminantConfig(white=(0.5, 0.6, 0.7)))
+    assert given.source == "given" and given.white == pytest.approx([0.5, 0.6, 0.7])
+    assert given.cct > 6504.0  # bluer than the white point
+    assert known_illuminant([grey_world_scene(6504.0, 1.0)], IlluminantConfig()) is None
+
+
+def test_a_clipped_reference_card_is_a_one_line_error():
+    """A card brighter than the white point says only that W is at least that much: refused, not guessed."""
+    config = IlluminantConfig(reference_box=(0.0, 0.2, 0.1, 0.8), reference_reflectance=0.9)
+    with pytest.raises(ValueError, match="clipped or nearly black") as error:
+        known_illuminant([scene_with_card(6504.0, 1.5, 0.9)], config)
+    assert "\n" not in str(error.value)
+    with pytest.raises(ValueError, match="not both"):
+        IlluminantConfig(white=(1.0, 1.0, 1.0), reference_box=(0.0, 0.0, 0.5, 0.5))
 
 
 def test_planckian_colours_round_trip():

@@ -33,7 +33,7 @@ from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.registry import load_face_model
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
-from deface.priors.illuminant import estimate_illuminant
+from deface.priors.illuminant import estimate_illuminant, known_illuminant
 from deface.runtime import keep_freed_memory
 
 
@@ -166,6 +166,9 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
         log.info(f"scene illuminant: {illuminant.source}, white level "
                  f"{np.round(illuminant.white, 3).tolist()}, {illuminant.cct:.0f} K")
         scene_light = start_from_scene(face, target.frames_srgb, classifier, illuminant, config, log)
+    elif config.tone.illuminant.white is not None or config.tone.illuminant.reference_box is not None:
+        log.info(f"tone.illuminant's white level is not used: the {config.preset} preset does not hold the lights "
+                 "to the scene (tone.scene_light_prior off)")
     inputs = FitInputs(target, landmarks, classifier, scene_light)
     return StageContext.create(inputs, face, decoupling, config, log), {"face_parsing": note}
 
@@ -199,7 +202,11 @@ def _face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, mode
 
 @torch.no_grad()
 def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig):
-    """The illuminant estimate from every frame's pixels outside the stage-1 face."""
+    """The white level the user gives (or points a reference card at), else the estimate from every frame's
+    pixels outside the stage-1 face."""
+    known = known_illuminant(target.frames_srgb, config.tone.illuminant)
+    if known is not None:
+        return known
     faces = [face.fragments(frame)[1].mask.numpy() > 0 for frame in range(target.num_frames)]
     return estimate_illuminant(target.frames_srgb, faces, config.tone.illuminant)
 

@@ -32,6 +32,9 @@ pixels are left out. Evidence, in order:
   red brick wall is not taken for a blue or red light, a warm room light is.
 With too few scene pixels (a tight crop) the estimate falls back to the photo's white point: W = 1, neutral.
 Clips pool the pixels of all frames.
+
+When the user knows the light, the estimate steps aside (:func:`known_illuminant`): a reference card in the photo
+(``reference_box``: its median linear colour over ``reference_reflectance`` is W) or W itself (``white``).
 """
 
 from __future__ import annotations
@@ -93,6 +96,33 @@ class IlluminantConfig:
     black backdrop, 80 % of it too dark to read, had W 0.50 from the grey world of its few lit pixels and a skin
     23 degrees lighter than his lit skin, 14 with the growing spread (W 0.80); MAE 9.8 -> 9.2; the renders of
     known albedo (every pixel usable) and the shadow pairs' gap (2.86) unchanged."""
+    white: tuple[float, float, float] | None = None
+    """W itself, when the capture says what it is (linear RGB a white surface facing the key light shows): a
+    studio's calibration, or a card read in one photo (``reference_box``; its fit records W as ``illuminant.white``
+    in params.json) for every photo taken under the same light. Used instead of the estimate."""
+    reference_box: tuple[float, float, float, float] | None = None
+    """Left, top, right, bottom of a grey or white card, or any flat matte surface of known reflectance, in the
+    photo, as fractions of its width and height (a card at pixels 300-420 across and 900-1000 down a 1200 x 1600
+    photo: 0.25,0.5625,0.35,0.625; in every frame of a clip: a fixed camera). W is its median linear colour over
+    ``reference_reflectance``, used instead of the estimate. Held at the face and facing the camera it sees the
+    key light at the camera's angle, a little less than a surface facing the light (cos 30 degrees = 0.87), so
+    the skin comes out that much lighter."""
+    reference_reflectance: float = 0.18
+    """Reflectance of the reference surface: 0.18 for a photographic grey card, about 0.9 for white paper."""
+
+    def __post_init__(self) -> None:
+        if self.white is not None and min(self.white) <= 0:
+            raise ValueError(f"tone.illuminant.white must be positive in every channel, got {self.white}")
+        if self.reference_box is not None:
+            left, top, right, bottom = self.reference_box
+            if not (0.0 <= left < right <= 1.0 and 0.0 <= top < bottom <= 1.0):
+                raise ValueError("tone.illuminant.reference_box is left,top,right,bottom as fractions of the image "
+                                 f"(0 <= left < right <= 1, 0 <= top < bottom <= 1), got {self.reference_box}")
+            if self.white is not None:
+                raise ValueError("give tone.illuminant.white or tone.illuminant.reference_box, not both")
+        if not 0.0 < self.reference_reflectance <= 1.0:
+            raise ValueError("tone.illuminant.reference_reflectance must be in (0, 1], "
+                             f"got {self.reference_reflectance}")
 
 
 @dataclass(frozen=True)
@@ -117,8 +147,7 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
     pixels = np.concatenate([_scene_pixels(f, m, config) for f, m in zip(frames_srgb, face_masks, strict=True)])
     total = sum(m.size for m in face_masks)
     linear = srgb_to_linear(pixels)
-    luminance = linear @ LUMINANCE
-    usable = (pixels.max(-1) < config.clipped) & (luminance >= config.dark)
+    usable = _readable(pixels, linear, config)
     if usable.sum() < config.min_scene_fraction * total:
         return IlluminantEstimate(np.ones(3), config.neutral_cct, "fallback", 0.0, int(usable.sum()))
     grey_sigma = grey_world_spread(usable, config)
@@ -133,6 +162,37 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
     level = _with_exposure_prior(level, sigma, config.exposure_sigma)
     return IlluminantEstimate(level * planckian_rgb(cct, config.neutral_cct), cct, source, weight,
                               int(usable.sum()))
+
+
+def known_illuminant(frames_srgb: list[np.ndarray], config: IlluminantConfig) -> IlluminantEstimate | None:
+    """W as given (``white``) or read off a reference card (``reference_box``) in frames [H, W, 3] sRGB, or None
+    when neither is set. ValueError (one line) when the box shows too little of the card to read."""
+    if config.white is not None:
+        white = np.asarray(config.white, dtype=np.float64)
+        return IlluminantEstimate(white, _cct(white, config), "given", 1.0, 0)
+    if config.reference_box is None:
+        return None
+    pixels = np.concatenate([_box(frame, config.reference_box).reshape(-1, 3) for frame in frames_srgb])
+    linear = srgb_to_linear(pixels)
+    usable = _readable(pixels, linear, config)
+    if usable.mean() < 0.5:
+        raise ValueError(f"tone.illuminant.reference_box {list(config.reference_box)}: {100 * (1 - usable.mean()):.0f} "
+                         "% of it is clipped or nearly black; choose a part of the card that is neither")
+    white = np.median(linear[usable], axis=0).astype(np.float64) / config.reference_reflectance
+    return IlluminantEstimate(white, _cct(white, config), "reference card", 1.0, int(usable.sum()))
+
+
+def _readable(pixels: np.ndarray, linear: np.ndarray, config: IlluminantConfig) -> np.ndarray:
+    """[N] bool: sRGB ``pixels`` [N, 3] (``linear`` their linear values) neither clipped nor nearly black."""
+    return (pixels.max(-1) < config.clipped) & (linear @ LUMINANCE >= config.dark)
+
+
+def _box(frame: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarray:
+    """The part of ``frame`` [H, W, C] inside ``box`` (left, top, right, bottom as fractions), at least a pixel."""
+    height, width = frame.shape[:2]
+    x0, y0 = min(int(box[0] * width), width - 1), min(int(box[1] * height), height - 1)
+    x1, y1 = max(x0 + 1, int(np.ceil(box[2] * width))), max(y0 + 1, int(np.ceil(box[3] * height)))
+    return frame[y0:y1, x0:x1]
 
 
 def grey_world(linear: np.ndarray, config: IlluminantConfig) -> tuple[np.ndarray, float]:
@@ -187,17 +247,27 @@ def _scene_pixels(frame: np.ndarray, face: np.ndarray, config: IlluminantConfig)
 def plausible_cct(linear_rgb: np.ndarray, config: IlluminantConfig) -> tuple[float, float]:
     """The colour temperature of a light of colour ``linear_rgb`` [3] and the weight the scene's colour got:
     the scene's CCT where it lies on the Planckian locus, the white point's where it lies far off it."""
+    cct, duv = _cct_duv(linear_rgb, config)
+    weight = float(np.exp(-0.5 * (duv / config.duv_sigma) ** 2))
+    low, high = config.cct_range
+    mired = weight * 1e6 / float(np.clip(cct, low, high)) + (1.0 - weight) * 1e6 / config.neutral_cct
+    return 1e6 / mired, weight
+
+
+def _cct(linear_rgb: np.ndarray, config: IlluminantConfig) -> float:
+    """The colour temperature (K, within ``cct_range``) nearest a light of colour ``linear_rgb`` [3]."""
+    return float(np.clip(_cct_duv(linear_rgb, config)[0], *config.cct_range))
+
+
+def _cct_duv(linear_rgb: np.ndarray, config: IlluminantConfig) -> tuple[float, float]:
+    """(CCT, Duv) of a light of colour ``linear_rgb`` [3], the photo's neutral standing for ``neutral_cct``."""
     from colour import XYZ_to_xy, xy_to_UCS_uv
     from colour.temperature import uv_to_CCT_Ohno2013
 
     # The photo's neutral (1, 1, 1) stands for a Planckian light at neutral_cct (planckian_rgb's convention).
     absolute = np.maximum(np.asarray(linear_rgb, dtype=np.float64), 1e-6) * _planck_linear_rgb(config.neutral_cct)
-    xyz = _rgb_to_xyz() @ absolute
-    cct, duv = uv_to_CCT_Ohno2013(xy_to_UCS_uv(XYZ_to_xy(xyz)))
-    weight = float(np.exp(-0.5 * (duv / config.duv_sigma) ** 2))
-    low, high = config.cct_range
-    mired = weight * 1e6 / float(np.clip(cct, low, high)) + (1.0 - weight) * 1e6 / config.neutral_cct
-    return 1e6 / mired, weight
+    cct, duv = uv_to_CCT_Ohno2013(xy_to_UCS_uv(XYZ_to_xy(_rgb_to_xyz() @ absolute)))
+    return float(cct), float(duv)
 
 
 def planckian_rgb(cct: float, neutral_cct: float = 6504.0) -> np.ndarray:
