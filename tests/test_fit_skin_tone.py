@@ -24,7 +24,7 @@ from deface.losses.illuminant import front_directions, peak_white
 from deface.losses.texture import SmoothDeparture
 from deface.models import load_face_model
 from deface.models.ita import texture_ita
-from deface.priors.illuminant import planckian_rgb
+from deface.priors.illuminant import IlluminantConfig, planckian_rgb
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import RenderConfig, Renderer
@@ -138,6 +138,11 @@ def test_params_record_the_tone_and_the_scene_light(neutral_fits, tmp_path):
     assert params["skin_tone"]["free"] and abs(params["skin_tone"]["ita"] - 50.0) < 15
     assert params["illuminant"]["source"] == "grey world"
     assert params["illuminant"]["cct"] == pytest.approx(6504, rel=0.05)
+    tone, sigma = params["skin_tone"], params["illuminant"]["level_sigma"]
+    assert 0 < sigma <= IlluminantConfig().exposure_sigma  # a scene's reading narrows the white point's spread
+    darker, lighter = tone["ita_interval"]
+    assert darker < tone["texture_ita"] < lighter
+    assert any(f"skin tone of the texture: ITA {tone['texture_ita']:.1f}" in note for note in params["notes"])
 
 
 def test_a_grayscale_photo_keeps_the_model_mean_tone_and_says_so(shared):

@@ -259,6 +259,10 @@ def test_report_command_rewrites_the_report_of_a_loaded_fit(written, tmp_path):
     assert result.exit_code == 0, result.output
     page = (tmp_path / "copy" / "report.html").read_text()
     assert "report/losses.png" in page and "textures/diffuse.png" in page
+    # the loaded fit's tone: the one params.json records, with the range its light level leaves open
+    tone = json.loads((written / "params.json").read_text())["skin_tone"]
+    darker, lighter = tone["ita_interval"]
+    assert f"skin ITA {tone['texture_ita']:.0f}; {darker:.0f} to {lighter:.0f} for the light level" in page
 
 
 def test_batch_index_links_each_report(photos, tmp_path, written):

@@ -8,6 +8,7 @@ import torch
 from skimage.color import lab2rgb
 
 from deface.eval.tone_benchmark import PROXY, TonePhoto, read_manifest, report_markdown, summary, with_proxy
+from deface.io.images import linear_to_srgb
 from deface.models.ita import (
     TONE_BOXES,
     in_tone_boxes,
@@ -17,6 +18,7 @@ from deface.models.ita import (
     photo_tone,
     pixel_uvs,
     texture_ita,
+    texture_tone,
     texture_tone_mask,
 )
 
@@ -124,6 +126,48 @@ def test_summary_figures_follow_their_definitions():
     assert all(np.isnan(v) for v in [*figures["group_speckle"].values(), *figures["group_detail"].values()])
     assert figures["slope"] == pytest.approx(0.0, abs=1e-9)
     assert figures["group_mae"]["dark"] == pytest.approx(55.0) and figures["bias"] > 15
+
+
+def skin_map(lab: tuple[float, float, float], size: int = 64) -> np.ndarray:
+    """A diffuse map [size, size, 3], linear RGB, of one CIELAB colour."""
+    from deface.io.images import srgb_to_linear
+
+    return np.broadcast_to(srgb_to_linear(lab2rgb(np.array([[lab]]))[0, 0]), (size, size, 3)).copy()
+
+
+@pytest.mark.parametrize("lab", [(68.0, 10.0, 15.0), (53.5, 12.0, 19.5), (40.0, 10.0, 17.5)])
+def test_the_tone_interval_is_the_map_under_a_light_level_one_sigma_off(lab):
+    diffuse = skin_map(lab)
+    tone = texture_tone(diffuse, 0.4)
+    assert tone["texture_ita"] == pytest.approx(ita_degrees(np.array(lab)), abs=0.3)
+    darker, lighter = tone["ita_interval"]
+    assert darker < tone["texture_ita"] < lighter
+    # independently: the ITA of the whole map made exp(-+0.4) as light, as a W exp(+-0.4) as bright would make it
+    assert darker == pytest.approx(texture_ita(linear_to_srgb(diffuse * np.exp(-0.4))), abs=0.02)
+    assert lighter == pytest.approx(texture_ita(linear_to_srgb(diffuse * np.exp(0.4))), abs=0.02)
+    assert texture_tone(diffuse, 0.0)["ita_interval"] == pytest.approx([tone["texture_ita"]] * 2, abs=0.02)
+    assert texture_tone(diffuse, None)["ita_interval"] is None
+    wider = texture_tone(diffuse, 0.8)["ita_interval"]
+    assert wider[0] < darker and wider[1] > lighter
+
+
+def test_a_dark_skins_interval_is_wider_for_the_same_light_level_spread():
+    """ITA moves further per unit of L* near L* = 50 than on a light skin (docs/skin-tone.md, Limits)."""
+    widths = [np.ptp(texture_tone(skin_map(lab), 0.3)["ita_interval"]) for lab in ((68.0, 10.0, 15.0),
+                                                                                   (46.5, 12.0, 19.5))]
+    assert widths[1] > 1.3 * widths[0]
+
+
+def test_interval_figures_count_the_references_inside():
+    photos = [TonePhoto(f"p{i}.png", g, ita) for i, (g, ita) in enumerate((("dark", 0.0), ("light", 50.0),
+                                                                             ("light", 40.0)))]
+    records = {"p0": {"albedo_ita": 5.0, "ita_interval": [-5.0, 15.0]},  # truth inside
+               "p1": {"albedo_ita": 58.0, "ita_interval": [52.0, 62.0]},  # outside
+               "p2": {"albedo_ita": 41.0, "ita_interval": [35.0, 45.0]}}  # inside
+    figures = summary(photos, records)
+    assert figures["in_interval"] == pytest.approx(2 / 3) and figures["interval_width"] == pytest.approx(40 / 3)
+    without = summary(photos, {k: {"albedo_ita": v["albedo_ita"]} for k, v in records.items()})
+    assert np.isnan(without["in_interval"]) and np.isnan(without["interval_width"])
 
 
 def test_proxy_is_scored_against_the_truth_only_where_it_is_known():

@@ -122,6 +122,9 @@ def test_a_white_patch_counts_less_the_smaller_it_is():
         sigma = config.white_patch_sigma * math.sqrt(config.white_fraction / seen)
         weight = sigma**-2 / (sigma**-2 + config.exposure_sigma**-2)
         assert luminance_of(estimate.white) == pytest.approx(0.9**weight, rel=0.005)
+        # the posterior spread of two independent log-normal readings, narrower than either
+        assert estimate.level_sigma == pytest.approx((sigma**-2 + config.exposure_sigma**-2) ** -0.5, rel=1e-6)
+        assert estimate.level_sigma < min(sigma, config.exposure_sigma)
         pulls.append(luminance_of(estimate.white))
     assert pulls == sorted(pulls)  # ever nearer 1 as the patch shrinks
     tiny = estimate_illuminant([backdrop_with_white_object(0.006, 0.9)], [face_mask()], config)
@@ -149,7 +152,7 @@ def test_a_scene_mostly_too_dark_to_read_counts_less():
     """The grey world of the few readable pixels is pulled towards the photo's white point the smaller their
     share (its spread grows as 1 / sqrt(share)), reaching the fallback's W = 1 without a jump."""
     config = IlluminantConfig()
-    levels = []
+    levels, spreads = [], []
     for readable in (1.0, 0.5, 0.2, 0.08):
         image = dim_room_behind_black(readable)
         estimate = estimate_illuminant([image], [face_mask()], config)
@@ -159,9 +162,12 @@ def test_a_scene_mostly_too_dark_to_read_counts_less():
         weight = sigma**-2 / (sigma**-2 + config.exposure_sigma**-2)
         assert luminance_of(estimate.white) == pytest.approx(0.3**weight, rel=0.03)
         levels.append(luminance_of(estimate.white))
+        spreads.append(estimate.level_sigma)
     assert levels == sorted(levels) and levels[-1] > 0.8  # ever nearer the fallback's 1 as less is readable
+    assert spreads == sorted(spreads)  # and the less sure
     fallback = estimate_illuminant([dim_room_behind_black(0.02)], [face_mask()], config)
     assert fallback.source == "fallback"
+    assert fallback.level_sigma == config.exposure_sigma > spreads[-1]  # the white point alone: the widest
 
 
 def _readable(image: np.ndarray, config: IlluminantConfig) -> np.ndarray:
@@ -212,6 +218,7 @@ def test_a_given_white_level_is_used_as_it_is():
     given = known_illuminant([grey_world_scene(6504.0, 1.0)], IlluminantConfig(white=(0.5, 0.6, 0.7)))
     assert given.source == "given" and given.white == pytest.approx([0.5, 0.6, 0.7])
     assert given.cct > 6504.0  # bluer than the white point
+    assert given.level_sigma == 0.0 and given.record()["level_sigma"] == 0.0  # the user's W is not doubted
     assert known_illuminant([grey_world_scene(6504.0, 1.0)], IlluminantConfig()) is None
 
 

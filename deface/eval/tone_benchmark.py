@@ -114,7 +114,7 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
             "initial_ita": texture_ita(to_srgb(result.initial_textures.diffuse)),
             "photo_ita": photo.ita, "photo_pixels": photo.pixels, "seconds": seconds,
             **fit_detail(result),
-            "tone": result.tone, "illuminant": result.illuminant}
+            "tone": result.tone, "illuminant": result.illuminant, "ita_interval": result.skin_tone()["ita_interval"]}
 
 
 def run_tone_benchmark(folder: Path, out_dir: Path, preset: str, baseline: bool, schedule: dict,
@@ -163,9 +163,20 @@ def summary(photos: list[TonePhoto], records: dict) -> dict:
     group_speckle = {g: _mean_of(records, photos, g, "speckle") for g in groups}
     group_detail = {g: _mean_of(records, photos, g, "detail") for g in groups}
     return {"mae": float(np.nanmean(error)), "group_mae": group_mae, "group_speckle": group_speckle,
-            "group_detail": group_detail,
+            "group_detail": group_detail, **_interval_figures(photos, records, reference),
             "bias": float(np.std(list(group_mae.values()))), "spearman": rho, "slope": slope,
             "mean_signed": float(np.nanmean(albedo - reference)), "photos": int(valid.sum())}
+
+
+def _interval_figures(photos: list[TonePhoto], records: dict, reference: np.ndarray) -> dict:
+    """How often the reference lies within the fits' ITA interval for the white level's spread, and the intervals'
+    mean width (NaN for a variant without intervals: no white level, or records cached before they existed)."""
+    ranges = [records[p.stem].get("ita_interval") for p in photos]
+    scored = [(r, ref) for r, ref in zip(ranges, reference, strict=True) if r is not None and np.isfinite(ref)]
+    if not scored:
+        return {"in_interval": float("nan"), "interval_width": float("nan")}
+    return {"in_interval": float(np.mean([low <= ref <= high for (low, high), ref in scored])),
+            "interval_width": float(np.mean([high - low for (low, high), _ in scored]))}
 
 
 def _mean_of(records: dict, photos: list[TonePhoto], group: str, key: str) -> float:
@@ -183,7 +194,10 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
              " (docs/skin-tone.md). Bias = std of the groups' mean absolute errors; slope = regression slope of"
              " albedo ITA on the reference (1 keeps the tone scale, 0 gives everybody one tone). Speckle: the"
              " texture's fine contrast beyond the photo's, relative to its level, x100, mean per group (0 = none);"
-             " detail: its fine contrast as a share of the photo's (1 = all of it; docs/textures.md)."]
+             " detail: its fine contrast as a share of the photo's (1 = all of it; docs/textures.md). In interval: the"
+             " share of photos whose reference lies within the fit's ITA interval for its white level's one-sigma"
+             " spread (params.json skin_tone.ita_interval; about 68 % if that spread is right); interval width: their"
+             " mean width in degrees."]
     records = with_proxy(photos, records)
     if PROXY in records:
         lines[-1] += (f" The row \"{PROXY}\" is the reference photo sets use (a proxy) scored against the truth:"
@@ -191,14 +205,15 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
     lines.append("")
     groups = list(summary(photos, next(iter(records.values())))["group_mae"])
     lines += ["| variant | MAE | " + " | ".join(f"MAE {g}" for g in groups) + " | bias | Spearman | slope |"
-              " mean signed | max error | " + " | ".join(f"speckle {g}" for g in groups) + " | "
-              + " | ".join(f"detail {g}" for g in groups) + " |", "|---" * (7 + 3 * len(groups)) + "|"]
+              " mean signed | max error | in interval | interval width | " + " | ".join(f"speckle {g}" for g in groups)
+              + " | " + " | ".join(f"detail {g}" for g in groups) + " |", "|---" * (9 + 3 * len(groups)) + "|"]
     for variant, recs in records.items():
         s = summary(photos, recs)
         worst = max(abs(recs[p.stem]["albedo_ita"] - reference_ita(p, recs[p.stem])) for p in photos
                     if np.isfinite(reference_ita(p, recs[p.stem])))
         cells = [f"{s['mae']:.1f}", *[f"{s['group_mae'][g]:.1f}" for g in groups], f"{s['bias']:.2f}",
                  f"{s['spearman']:.2f}", f"{s['slope']:.2f}", f"{s['mean_signed']:+.1f}", f"{worst:.1f}",
+                 _cell(100 * s["in_interval"], "{:.0f} %"), _cell(s["interval_width"], "{:.1f}"),
                  *[_cell(s['group_speckle'][g]) for g in groups], *[_cell(s['group_detail'][g]) for g in groups]]
         lines.append(f"| {variant} | " + " | ".join(cells) + " |")
     lines += ["", "| photo | group | reference | " + " | ".join(v if v == PROXY else f"{v} albedo" for v in records)
@@ -212,9 +227,9 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
     return "\n".join(lines) + "\n"
 
 
-def _cell(value: float) -> str:
-    """A texture measure for the table; "-" where there is no texture (the proxy)."""
-    return "-" if np.isnan(value) else f"{value:.2f}"
+def _cell(value: float, form: str = "{:.2f}") -> str:
+    """A measure for the table; "-" where the variant has none (the proxy has no texture, NextFace no interval)."""
+    return "-" if np.isnan(value) else form.format(value)
 
 
 def contact_sheet(folder: Path, out_dir: Path, photos: list[TonePhoto], variants: list[str], tile: int = 160):

@@ -97,7 +97,11 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
                    "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame"},
         "albedo_coefficients": _np(result.albedo).tolist(),
         "skin_tone": {"ita": result.tone if config.tone.free_tone else None, "free": config.tone.free_tone,
-                      "convention": "ITA degrees on the albedo model's tone axis"},
+                      "convention": "ITA degrees on the albedo model's tone axis",
+                      **result.skin_tone(),
+                      "interval_convention": "texture_ita: the diffuse map's cheeks and forehead (deface.models.ita); "
+                                          "ita_interval: the same with the map's level over the white level's "
+                                          "one-sigma spread (illuminant.level_sigma)"},
         "illuminant": result.illuminant,
         "frames": _frames(record.get("frames", [0]), result.kept_frames),
         "preset": config.preset,

@@ -19,6 +19,7 @@ from deface.fit.scene import FrameGeometry, topology_tensors
 from deface.fit.state import FrameRender, StageContext, compose_face
 from deface.io.images import srgb_to_linear
 from deface.models.base import FaceModel
+from deface.models.ita import texture_tone
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import Fragments, Renderer, ShadowTransfer
@@ -96,6 +97,13 @@ class FitOutput:
     kept_frames: list[int] | None  # positions of the fitted frames among the input's (None: all)
     record: RunRecord
     renderer: Renderer  # the fit's renderer settings (bands, shadows, rays, seed)
+
+    def skin_tone(self) -> dict:
+        """The diffuse map's ITA and its interval over the white level's spread
+        (:func:`~deface.models.ita.texture_tone`; no interval without a white level: a preset without the
+        scene-light prior, or a fit saved before it)."""
+        sigma = (self.illuminant or {}).get("level_sigma")
+        return texture_tone(self.textures.diffuse.detach().numpy(), sigma)
 
     @property
     def num_frames(self) -> int:

@@ -30,6 +30,7 @@ from deface.fit.target import FitTarget, scale_landmarks, working_frames
 from deface.fit.texels import complete_textures, seen_texels, texture_confidence
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
+from deface.models.ita import texture_tone
 from deface.models.registry import load_face_model
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
@@ -122,7 +123,25 @@ def _run_stages(target: FitTarget, config: FitConfig, models_dir, log: FitLog) -
     log.start("textures")
     finished = finish_textures(context, stage3)
     log.stop("textures")
+    _log_tone(context, finished, log)
     return FitState(context, stage2, stage3, finished, optional)
+
+
+def _log_tone(context: StageContext, finished: FinishedTextures, log: FitLog) -> None:
+    """Say the texture's skin tone and how far the unknown strength of the light leaves it open."""
+    light = context.inputs.scene_light
+    if light is None:
+        return
+    illuminant = light.illuminant
+    tone = texture_tone(finished.textures.diffuse.detach().numpy(), illuminant.level_sigma)
+    if illuminant.level_sigma == 0:
+        where = "as given" if illuminant.source == "given" else f"from the {illuminant.source}"
+        log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f} (white level {where})")
+        return
+    darker, lighter = tone["ita_interval"]
+    log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
+             f"level's one-sigma spread ({illuminant.source}); a grey card in the photo "
+             "(tone.illuminant.reference_box) or the light's white level (tone.illuminant.white) narrows it")
 
 
 @torch.no_grad()

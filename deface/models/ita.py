@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from skimage.color import rgb2lab
 
-from deface.io.images import CLIPPED, GAMMA, LUMINANCE
+from deface.io.images import CLIPPED, GAMMA, LUMINANCE, linear_to_srgb
 
 # (u0, u1, y0, y1) with y = 1 - v measured downward from the texture image's top (ICT layout).
 TONE_BOXES = {
@@ -72,6 +72,24 @@ def texture_ita(diffuse_srgb: np.ndarray) -> float:
     """ITA of a diffuse texture [H, W, 3] (sRGB-encoded, as written to textures/diffuse.png)."""
     mask = texture_tone_mask(*diffuse_srgb.shape[:2])
     return ita_of_srgb(diffuse_srgb[mask])
+
+
+def texture_tone(diffuse_linear: np.ndarray, level_sigma: float | None) -> dict:
+    """The tone of a diffuse map [H, W, 3] (linear RGB): its ITA, and the ITA interval that the white level's
+    one-sigma spread ``level_sigma`` (natural log; None when no white level was estimated) allows.
+
+    A fit holds its brightest light to the white level W, so the map's level is the photo's over W: W brighter by
+    exp(sigma) makes every texel exp(-sigma) as light (the map's colour stays). The interval is the ITA of the
+    map's tone boxes scaled by exp(-sigma) and exp(+sigma); it covers W's level only, not the light's colour nor
+    how the skin was read (docs/skin-tone.md)."""
+    linear = np.clip(np.asarray(diffuse_linear, dtype=np.float64), 0.0, 1.0)
+    texels = linear[texture_tone_mask(*linear.shape[:2])]
+    record = {"texture_ita": round(ita_of_srgb(linear_to_srgb(texels)), 2), "ita_interval": None}
+    if level_sigma is not None:
+        darker, lighter = (ita_of_srgb(linear_to_srgb(np.clip(texels * np.exp(s), 0.0, 1.0)))
+                           for s in (-level_sigma, level_sigma))
+        record["ita_interval"] = [round(darker, 2), round(lighter, 2)]
+    return record
 
 
 def lit_skin(pixels_srgb: np.ndarray) -> np.ndarray:

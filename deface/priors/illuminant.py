@@ -131,14 +131,15 @@ class IlluminantEstimate:
 
     white: np.ndarray  # [3] linear RGB a white surface facing the key light shows
     cct: float  # correlated colour temperature (K) of the light
-    source: str  # "white patch", "grey world" or "fallback"
+    source: str  # "white patch", "grey world", "fallback", "given" or "reference card"
     colour_weight: float  # in [0, 1]: how much of the colour came from the scene (the rest: the white point)
     scene_pixels: int  # usable pixels outside the face
+    level_sigma: float = 0.0  # natural-log spread of W's level: the estimate's one sigma (0: the user's W)
 
     def record(self) -> dict:
         return {"white": [round(float(v), 5) for v in self.white], "cct": round(self.cct, 1),
                 "source": self.source, "colour_weight": round(self.colour_weight, 4),
-                "scene_pixels": self.scene_pixels}
+                "scene_pixels": self.scene_pixels, "level_sigma": round(self.level_sigma, 4)}
 
 
 def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarray],
@@ -149,7 +150,8 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
     linear = srgb_to_linear(pixels)
     usable = _readable(pixels, linear, config)
     if usable.sum() < config.min_scene_fraction * total:
-        return IlluminantEstimate(np.ones(3), config.neutral_cct, "fallback", 0.0, int(usable.sum()))
+        return IlluminantEstimate(np.ones(3), config.neutral_cct, "fallback", 0.0, int(usable.sum()),
+                                  config.exposure_sigma)
     grey_sigma = grey_world_spread(usable, config)
     patch = _white_patch(pixels, linear, grey_sigma, config)
     if patch is not None:
@@ -159,9 +161,9 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
         colour, level = grey_world(linear[usable], config)
         sigma, source = grey_sigma, "grey world"
     cct, weight = plausible_cct(colour, config)
-    level = _with_exposure_prior(level, sigma, config.exposure_sigma)
+    level, level_sigma = _with_exposure_prior(level, sigma, config.exposure_sigma)
     return IlluminantEstimate(level * planckian_rgb(cct, config.neutral_cct), cct, source, weight,
-                              int(usable.sum()))
+                              int(usable.sum()), level_sigma)
 
 
 def known_illuminant(frames_srgb: list[np.ndarray], config: IlluminantConfig) -> IlluminantEstimate | None:
@@ -229,10 +231,11 @@ def _white_patch(pixels: np.ndarray, linear: np.ndarray, grey_sigma: float, conf
     return colour, float(colour @ LUMINANCE) / config.white_reflectance, float(sigma)
 
 
-def _with_exposure_prior(level: float, sigma: float, exposure_sigma: float) -> float:
-    """Precision-weighted mean in log space of the scene's level and the photo's white point (log 1 = 0)."""
-    weight = sigma**-2 / (sigma**-2 + exposure_sigma**-2)
-    return float(np.exp(weight * np.log(level)))
+def _with_exposure_prior(level: float, sigma: float, exposure_sigma: float) -> tuple[float, float]:
+    """Precision-weighted mean in log space of the scene's level and the photo's white point (log 1 = 0), and its
+    log spread (the two spreads combined as independent Gaussians)."""
+    precision = sigma**-2 + exposure_sigma**-2
+    return float(np.exp(sigma**-2 / precision * np.log(level))), float(precision**-0.5)
 
 
 def _scene_pixels(frame: np.ndarray, face: np.ndarray, config: IlluminantConfig) -> np.ndarray:

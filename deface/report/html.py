@@ -86,8 +86,8 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
 <h2>Lights kept ({len(fit.kept)} of {fit.lights.shape[0]}) and the face region</h2>
 <div class="row">{lights}{_figure(f"{base}masks/face.png", "face region M_o")}</div>
 <h2>Textures</h2>
-<div class="row">{_figure("textures/diffuse.png", "diffuse", 256)}{_figure("textures/specular.png", "specular", 256)}
-{_figure("textures/roughness.png", "roughness", 256)}
+<div class="row">{_figure("textures/diffuse.png", _diffuse_caption(fit), 256)}
+{_figure("textures/specular.png", "specular", 256)}{_figure("textures/roughness.png", "roughness", 256)}
 {_figure(f"{REPORT_DIR}/neutral.png", "albedo under the neutral light")}</div>
 <h2>Turntable (studio light)</h2>
 <div class="row">{_figure(f"{REPORT_DIR}/turntable.gif", "the textured mesh turning")}</div>
@@ -101,6 +101,15 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
     path = folder / "report.html"
     path.write_text(page)
     return path
+
+
+def _diffuse_caption(fit: FitOutput) -> str:
+    """The diffuse map's caption: its skin tone, and the range the unknown light level leaves open."""
+    tone = fit.skin_tone()
+    if tone["ita_interval"] is None:
+        return f"diffuse (skin ITA {tone['texture_ita']:.0f})"
+    darker, lighter = tone["ita_interval"]
+    return f"diffuse (skin ITA {tone['texture_ita']:.0f}; {darker:.0f} to {lighter:.0f} for the light level)"
 
 
 def _figure(src: str, caption: str, width: int | None = None) -> str:
