@@ -84,6 +84,23 @@ def test_batch_status_summarises_and_names_failures(tmp_path):
     assert missing.exit_code == 2 and "no batch record" in missing.output
 
 
+def test_status_counts_the_done_inputs_tones_by_category_and_how_sure_they_are(tmp_path):
+    from dataclasses import replace
+
+    tones = {"a": (62.0, [58.0, 66.0]), "b": (48.0, [40.0, 55.0]), "c": (47.0, [20.0, 60.0]),
+             "d": (-35.0, [-50.0, -10.0]), "e": (30.0, None)}
+    for name, (ita, interval) in tones.items():
+        append_record(tmp_path, replace(_record(f"{name}.jpg", "done"),
+                                        skin_tone={"texture_ita": ita, "ita_interval": interval}))
+    append_record(tmp_path, _record("f.jpg", "failed", error="no face"))  # no tone: not counted
+    append_record(tmp_path, replace(_record("c.jpg", "done"), skin_tone={"texture_ita": 12.0, "ita_interval": [5.0,
+                                                                                                              19.0]}))
+    lines = summarise(read_records(tmp_path)).tones  # c's last fit (tan, sure) replaces its first
+    assert lines[0].endswith("very light 1, light 1, intermediate 1, tan 1, brown 0, dark 1")
+    assert lines[1].startswith("3 of 4 within 20 degrees") and "median interval 14" in lines[1]
+    assert summarise([_record("a.jpg", "done")]).tones == []  # records written before the tone was recorded
+
+
 # --- resuming -------------------------------------------------------------------------------------------
 
 

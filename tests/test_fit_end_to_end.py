@@ -10,6 +10,7 @@ import torch
 from PIL import Image
 from typer.testing import CliRunner
 
+from deface.batch.record import read_records
 from deface.cli.main import app
 from deface.eval.synthetic import make_shadowed_face
 from deface.fit import presets
@@ -18,6 +19,7 @@ from deface.fit.log import FitLog
 from deface.fit.pipeline import fit_target
 from deface.fit.target import FitTarget
 from deface.models import load_face_model
+from deface.models.ita import ita_group
 from deface.render.mesh import sample_texture
 
 SHORT = {"iterations.stage1": 100, "iterations.stage2": 120, "iterations.stage3": 60,
@@ -100,6 +102,11 @@ def test_fit_command_writes_all_outputs(photos, tmp_path):
     mtl = (folder / "mesh.mtl").read_text()
     assert "map_Kd textures/diffuse.png" in mtl and "map_Pr textures/roughness.png" in mtl
     assert not list(tmp_path.glob(".*partial"))  # no staging folder left behind
+    # The batch record carries the texture's tone as params.json has it, and `deface batch status` counts it.
+    tone = params["skin_tone"]
+    assert [r.skin_tone for r in read_records(tmp_path)] == [{k: tone[k] for k in ("texture_ita", "ita_interval")}]
+    status = CliRunner().invoke(app, ["batch", "status", str(tmp_path)])
+    assert f"{ita_group(tone['texture_ita'])} 1" in status.output and "skin tones of 1 fit(s)" in status.output
     # A second run skips the finished input instead of redoing or destroying it.
     again = CliRunner().invoke(app, ["fit", str(photos / "real-foliage-shadow-9177-004.png"), "-o", str(tmp_path),
                                      "--preset", "fast", "--iterations", "30,12,4"])

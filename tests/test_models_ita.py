@@ -13,6 +13,7 @@ from deface.models.ita import (
     TONE_BOXES,
     in_tone_boxes,
     ita_degrees,
+    ita_group,
     ita_of_srgb,
     lit_skin,
     photo_tone,
@@ -126,6 +127,13 @@ def test_summary_figures_follow_their_definitions():
     assert all(np.isnan(v) for v in [*figures["group_speckle"].values(), *figures["group_detail"].values()])
     assert figures["slope"] == pytest.approx(0.0, abs=1e-9)
     assert figures["group_mae"]["dark"] == pytest.approx(55.0) and figures["bias"] > 15
+
+
+@pytest.mark.parametrize("ita, group", [(70.0, "very light"), (55.0, "light"), (41.5, "light"),
+                                        (30.0, "intermediate"), (10.0, "brown"), (10.1, "tan"), (-30.0, "dark"),
+                                        (-29.9, "brown"), (-60.0, "dark")])
+def test_ita_groups_follow_del_bino(ita, group):
+    assert ita_group(ita) == group
 
 
 def skin_map(lab: tuple[float, float, float], size: int = 64) -> np.ndarray:

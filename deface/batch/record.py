@@ -15,10 +15,13 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import statistics
 import time
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+
+from deface.models.ita import ITA_GROUPS, ita_group
 
 RECORD_FILE = "batch.jsonl"
 STATUSES = ("done", "failed", "skipped")
@@ -39,6 +42,7 @@ class BatchRecord:
     attempt: int = 1  # 2 = the retry after a worker died
     engine: str = "local"  # "inline" (this process), "local" (worker processes) or "ray"
     cpu_seconds: float | None = None  # CPU time of the fitting process during the attempt (load-independent)
+    skin_tone: dict | None = None  # done: {"texture_ita", "ita_interval"} (params.json skin_tone; interval may be None)
     finished: str = field(default_factory=lambda: time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
 
     def __post_init__(self) -> None:
@@ -92,6 +96,40 @@ def latest_states(records: Iterable[BatchRecord]) -> dict[str, BatchRecord]:
     return states
 
 
+SURE_TONE_WIDTH = 20.0
+"""An ITA interval this wide or narrower (degrees) pins the tone to about one skin category (:data:`ITA_GROUPS`
+spans 13-18 degrees between its bounds): a white patch in the scene, a card or a given white level."""
+
+
+def tone_text(tone: dict | None) -> str:
+    """", skin ITA 42 (30 to 51)" for a done line; "" without a tone."""
+    if tone is None:
+        return ""
+    interval = tone.get("ita_interval")
+    span = f" ({interval[0]:.0f} to {interval[1]:.0f})" if interval is not None else ""
+    return f", skin ITA {tone['texture_ita']:.0f}{span}"
+
+
+def tone_lines(states: Iterable[BatchRecord]) -> list[str]:
+    """The skin tones of the done inputs by category, and how many the light level leaves open (for balancing a
+    data set by tone; docs/skin-tone.md)."""
+    tones = [r.skin_tone for r in states if r.status == "done" and r.skin_tone is not None]
+    if not tones:
+        return []
+    counts = {name: 0 for name, _ in ITA_GROUPS}
+    for tone in tones:
+        counts[ita_group(tone["texture_ita"])] += 1
+    widths = [tone["ita_interval"][1] - tone["ita_interval"][0] for tone in tones if tone.get("ita_interval")]
+    line = (f"skin tones of {len(tones)} fit(s) (ITA categories of Del Bino et al. 2006): "
+            + ", ".join(f"{name} {count}" for name, count in counts.items()))
+    if not widths:
+        return [line]
+    sure = sum(width <= SURE_TONE_WIDTH for width in widths)
+    return [line, f"{sure} of {len(widths)} within {SURE_TONE_WIDTH:.0f} degrees for the light level (median "
+                  f"interval {statistics.median(widths):.0f}); the rest: a grey card or a known white level "
+                  "(README) narrows them"]
+
+
 @dataclass(frozen=True)
 class BatchSummary:
     """What ``deface batch status`` prints, from the records of one output folder."""
@@ -106,6 +144,7 @@ class BatchSummary:
     mean_cpu_seconds: float | None  # CPU time per done attempt (where recorded)
     versions: list[str]
     presets: list[str]
+    tones: list[str] = field(default_factory=list)  # the lines of tone_lines
 
     def lines(self) -> list[str]:
         if not self.inputs:
@@ -118,6 +157,7 @@ class BatchSummary:
         if len(self.presets) > 1:
             text.append("warning: more than one preset in this folder (`deface fit` refuses to mix them unless "
                         "--overwrite redoes the finished outputs)")
+        text += self.tones
         text += [f"failed: {record.path}: {record.error}" for record in self.failed]
         return text
 
@@ -136,4 +176,5 @@ def summarise(records: list[BatchRecord]) -> BatchSummary:
         mean_cpu_seconds=sum(cpu) / len(cpu) if (cpu := [r.cpu_seconds for r in done if r.cpu_seconds]) else None,
         versions=sorted({r.version for r in records if r.status != "skipped"} or {r.version for r in records}),
         presets=sorted({r.preset for r in states.values()}),
+        tones=tone_lines(states.values()),
     )

@@ -17,7 +17,7 @@ from rich.markup import escape
 import deface
 from deface.batch.display import BatchDisplay, Tally, Throttle
 from deface.batch.pool import LocalPool
-from deface.batch.record import BatchRecord, append_record
+from deface.batch.record import BatchRecord, append_record, tone_text
 from deface.batch.resume import Plan, plan_batch
 from deface.batch.task import Job, Outcome, run_job
 from deface.fit.config import FitConfig
@@ -150,7 +150,8 @@ class BatchRun:
         folder = self.output / item.name
         if outcome.status == "done":
             kept = f", lights kept {list(outcome.lights_kept)}" if outcome.lights_kept is not None else ""
-            self.display.line(escape(f"{item.path}: done in {outcome.seconds:.1f} s{kept} -> {folder}"))
+            self.display.line(escape(f"{item.path}: done in {outcome.seconds:.1f} s{kept}{tone_text(outcome.skin_tone)}"
+                                     f" -> {folder}"))
         elif outcome.status == "skipped":
             self.display.line(escape(f"{item.path}: already done in {folder} (use --overwrite to redo)"))
         elif outcome.status == "busy":
@@ -173,7 +174,8 @@ class BatchRun:
             lights_kept=list(outcome.lights_kept) if outcome.lights_kept is not None else None,
             error=outcome.error, version=deface.__version__, preset=self.config.preset, attempt=attempt,
             engine=self.engine,
-            cpu_seconds=round(outcome.cpu_seconds, 3) if outcome.cpu_seconds is not None else None)
+            cpu_seconds=round(outcome.cpu_seconds, 3) if outcome.cpu_seconds is not None else None,
+            skin_tone=outcome.skin_tone)
         try:
             append_record(self.output, record)
         except OSError as error:

@@ -52,6 +52,7 @@ class Outcome:
     lights_kept: tuple[int, ...] | None = None
     error: str | None = None  # one line (failed, busy)
     cpu_seconds: float | None = None  # CPU time of the process (all its threads) during this input
+    skin_tone: dict | None = None  # done: the texture's ITA and interval (FitOutput.skin_tone)
     detail: str | None = None  # traceback of a failure, for --verbose
 
 
@@ -80,14 +81,15 @@ def run_job(job: Job, log: FitLog) -> Outcome:
         with claimed_output(job.folder):
             if finished_params(job.folder) and not job.overwrite:
                 return Outcome("skipped", 0.0)
-            kept = fit_and_write(job.item, job.folder, job.config, job.models, log)
+            kept, tone = fit_and_write(job.item, job.folder, job.config, job.models, log)
     except OutputBusy as busy:
         return Outcome("busy", 0.0, error=str(busy))
     except Exception as error:  # noqa: BLE001 - every failure of one input is one line; the batch goes on
         return Outcome("failed", time.perf_counter() - started, error=error_message(error),
                        detail="".join(traceback.format_exception(error)).rstrip(),
                        cpu_seconds=time.process_time() - cpu)
-    return Outcome("done", time.perf_counter() - started, lights_kept=kept, cpu_seconds=time.process_time() - cpu)
+    return Outcome("done", time.perf_counter() - started, lights_kept=kept, cpu_seconds=time.process_time() - cpu,
+                   skin_tone=tone)
 
 
 def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], list[int]]:
@@ -97,8 +99,10 @@ def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], l
     return read_spread_frames(item.path, config.max_frames, config.frame_stride, max_side=LOAD_MAX_SIDE)
 
 
-def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models, log: FitLog) -> tuple[int, ...]:
-    """Fit ``item`` and write its outputs atomically into ``folder`` -> the kept lights' indices."""
+def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
+                  log: FitLog) -> tuple[tuple[int, ...], dict]:
+    """Fit ``item`` and write its outputs atomically into ``folder`` -> the kept lights' indices and the texture's
+    skin tone."""
     frames, indices = load_frames(item, config)
     result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log)
     record = {"path": str(item.path), "kind": item.kind, "frames": indices,
@@ -108,4 +112,4 @@ def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models, log:
     except OSError as error:
         raise OutputError(f"{folder}: cannot write ({error.strerror or one_line(error)}); what was there "
                           "before is unchanged") from error
-    return tuple(int(k) for k in result.kept)
+    return tuple(int(k) for k in result.kept), result.skin_tone()

@@ -40,6 +40,17 @@ def ita_degrees(lab: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(lab[..., 0] - 50.0, lab[..., 2]))
 
 
+ITA_GROUPS = (("very light", 55.0), ("light", 41.0), ("intermediate", 28.0), ("tan", 10.0), ("brown", -30.0),
+              ("dark", -np.inf))
+"""Skin colour categories by ITA (Chardon et al. 1991; Del Bino et al. 2006): each name with its lower bound in
+degrees, lightest first."""
+
+
+def ita_group(ita: float) -> str:
+    """The :data:`ITA_GROUPS` category of an ITA in degrees."""
+    return next(name for name, lower in ITA_GROUPS if ita > lower)
+
+
 def median_lab(srgb: np.ndarray) -> np.ndarray:
     """Median (L*, a*, b*) [3] of sRGB-encoded colours [N, 3] in [0, 1]."""
     lab = rgb2lab(np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)[None])[0]
