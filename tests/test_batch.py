@@ -25,7 +25,15 @@ from typer.testing import CliRunner
 
 import deface.batch.task as task
 from deface.batch.pool import LocalPool
-from deface.batch.record import BatchRecord, append_record, latest_states, read_records, record_path, summarise
+from deface.batch.record import (
+    BatchRecord,
+    append_record,
+    latest_states,
+    read_records,
+    record_path,
+    summarise,
+    tone_text,
+)
 from deface.batch.resume import plan_batch, settings_differences
 from deface.cli.main import app
 from deface.export.files import write_json
@@ -99,6 +107,9 @@ def test_status_counts_the_done_inputs_tones_by_category_and_how_sure_they_are(t
     assert lines[0].endswith("very light 1, light 1, intermediate 1, tan 1, brown 0, dark 1")
     assert lines[1].startswith("3 of 4 within 20 degrees") and "median interval 14" in lines[1]
     assert summarise([_record("a.jpg", "done")]).tones == []  # records written before the tone was recorded
+    assert tone_text({"texture_ita": 41.6, "ita_interval": [30.2, 50.7]}) == ", skin ITA 42 (30 to 51)"
+    assert tone_text({"texture_ita": 41.6, "ita_interval": [41.6, 41.6]}) == ", skin ITA 42"  # a known light
+    assert tone_text({"texture_ita": 41.6, "ita_interval": None}) == ", skin ITA 42" and tone_text(None) == ""
 
 
 # --- resuming -------------------------------------------------------------------------------------------

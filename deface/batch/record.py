@@ -102,11 +102,12 @@ spans 13-18 degrees between its bounds): a white patch in the scene, a card or a
 
 
 def tone_text(tone: dict | None) -> str:
-    """", skin ITA 42 (30 to 51)" for a done line; "" without a tone."""
+    """", skin ITA 42 (30 to 51)" for a done line (no range for a known light); "" without a tone."""
     if tone is None:
         return ""
     interval = tone.get("ita_interval")
-    span = f" ({interval[0]:.0f} to {interval[1]:.0f})" if interval is not None else ""
+    open_range = interval is not None and interval[1] > interval[0]
+    span = f" ({interval[0]:.0f} to {interval[1]:.0f})" if open_range else ""
     return f", skin ITA {tone['texture_ita']:.0f}{span}"
 
 
