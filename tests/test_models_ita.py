@@ -8,7 +8,7 @@ import torch
 from skimage.color import lab2rgb
 
 from deface.eval.tone_benchmark import PROXY, TonePhoto, read_manifest, report_markdown, summary, with_proxy
-from deface.io.images import linear_to_srgb
+from deface.io.images import linear_to_srgb, srgb_to_linear
 from deface.models.ita import (
     TONE_BOXES,
     in_tone_boxes,
@@ -138,8 +138,6 @@ def test_ita_groups_follow_del_bino(ita, group):
 
 def skin_map(lab: tuple[float, float, float], size: int = 64) -> np.ndarray:
     """A diffuse map [size, size, 3], linear RGB, of one CIELAB colour."""
-    from deface.io.images import srgb_to_linear
-
     return np.broadcast_to(srgb_to_linear(lab2rgb(np.array([[lab]]))[0, 0]), (size, size, 3)).copy()
 
 
