@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 from typing import Annotated
 
@@ -43,11 +44,9 @@ def serve_command(
     """A web page to drop photos or a clip on, watch the fit, turn the textured head in 3D, relight it and download
     the results (the same files as `deface fit`). The operator's --iterations, --resolution, --texture-size and --set
     apply to every fit, on top of the preset chosen in the page."""
-    try:
-        import gradio  # noqa: F401
-    except ImportError:
+    if importlib.util.find_spec("gradio") is None:  # not imported here: serve.py sets its environment first
         console.print(f"[red]error:[/red] {WEB_EXTRA}")
-        raise typer.Exit(EXIT_FAILED) from None
+        raise typer.Exit(EXIT_FAILED)
     from deface.models.registry import require_face_model
     from deface.web.config import WebConfig
     from deface.web.serve import serve

@@ -121,9 +121,10 @@ class WebApp:
 
     def _wire(self) -> None:
         card = [self.card, self.box, self.corner, self.status]
-        self.files.change(self.preview_card, self.files, card, queue=False)
-        self.card.select(self.click_card, [self.files, self.corner], card)
-        self.clear_card.click(self.preview_card, self.files, card, queue=False)
+        quiet = {"show_progress": "hidden"}
+        self.files.change(self.preview_card, self.files, card, queue=False, **quiet)
+        self.card.select(self.click_card, [self.files, self.corner], card, **quiet)
+        self.clear_card.click(self.preview_card, self.files, card, queue=False, **quiet)
         self.fit.click(self.submit, [self.files, self.preset, self.box, self.card_kind, self.jobs],
                        [self.jobs, self.status, self.timer], concurrency_limit=None, show_progress="hidden")
         self.timer.tick(self.refresh, [self.jobs, self.known, self.result],

@@ -21,7 +21,9 @@ from deface.io.inputs import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, InputItem, clas
 from deface.io.video import read_spread_frames
 
 INPUTS_DIR = "inputs"
-PREVIEW_SIDE = 640  # longest side of the photo the grey card is drawn on (the box is in fractions: any size)
+PREVIEW_SIDE = 640
+"""Longest side of the photo the grey card is drawn on (the box is in fractions: any size will do). Smaller photos
+are enlarged to it: Gradio maps a click to image pixels assuming the page never shows the image enlarged."""
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 SUPPORTED = f"photos {' '.join(IMAGE_EXTENSIONS)}; clips {' '.join(VIDEO_EXTENSIONS)}"
 
@@ -92,7 +94,11 @@ def preview(upload: str | Path) -> np.ndarray:
         raise InputError(str(error).replace(str(path), path.name)) from None
     except (OSError, ValueError) as error:
         raise InputError(f"{path.name}: cannot read it ({one_line(error)})") from None
-    return np.round(np.clip(frame, 0, 1) * 255).astype(np.uint8)
+    picture = Image.fromarray(np.round(np.clip(frame, 0, 1) * 255).astype(np.uint8))
+    scale = PREVIEW_SIDE / max(picture.size)
+    if scale > 1:
+        picture = picture.resize((round(picture.width * scale), round(picture.height * scale)), Image.BICUBIC)
+    return np.asarray(picture)
 
 
 def box_from_corners(first: tuple[float, float], second: tuple[float, float],
