@@ -87,7 +87,7 @@ class FitService:
         self.workers = workers or cpu_count()
         self.keep_jobs = keep_jobs
         self.lock = threading.Lock()
-        self.paces = PaceBook()
+        self.paces = PaceBook(self.output)  # time left learnt from the fits done here, kept across restarts
         self._jobs: list[WebJob] = []
         self._queue: queue.Queue[WebJob | None] = queue.Queue()
         self._closing = False
