@@ -28,6 +28,7 @@ SCHEDULE = {"iterations": "10,10,4", "resolution": 64, "texture_size": 128}
 CLI_SCHEDULE = ["--iterations", "10,10,4", "--resolution", "64", "--texture-size", "128"]
 PHOTO = "nextface-s1.png"
 CARD = "grey card (18 %)"
+BAD = ("coffee.png", "cups.mp4", "broken.jpg", "notes.txt")
 VOLATILE = re.compile(r"\d+(\.\d+)? s\b")  # durations in the log's notes and the report
 
 
@@ -51,13 +52,17 @@ def wait(page, jobs: list[str], seconds: float = 300) -> None:
 
 @pytest.fixture(scope="module")
 def bad_files(tmp_path_factory):
+    import imageio.v2 as imageio
     from skimage import data
 
     folder = tmp_path_factory.mktemp("bad")
     Image.fromarray(data.coffee()).save(folder / "coffee.png")  # a real photo without a face
+    with imageio.get_writer(str(folder / "cups.mp4"), format="FFMPEG", fps=4, macro_block_size=1) as clip:
+        for shift in range(4):  # a clip without a face in any frame
+            clip.append_data(np.roll(data.coffee()[:256, :384], 8 * shift, axis=1))
     (folder / "broken.jpg").write_bytes(b"\xff\xd8\xff\xe0 not really a jpeg")
     (folder / "notes.txt").write_text("not a photo")
-    return [str(folder / name) for name in ("coffee.png", "broken.jpg", "notes.txt")]
+    return [str(folder / name) for name in BAD]
 
 
 @pytest.fixture(scope="module")
@@ -80,12 +85,11 @@ def test_faceless_broken_and_unsupported_files_get_one_line_each(web, jobs):
     ids, _ = jobs
     status = web.status_text(ids)
     job = status.split("**Job 2**")[0]
-    lines = {name: next(line for line in job.splitlines() if name in line) for name in
-             ("coffee.png", "broken.jpg", "notes.txt")}
-    assert "no face" in lines["coffee.png"].lower()
+    lines = {name: next(line for line in job.splitlines() if name in line) for name in BAD}
+    assert "no face" in lines["coffee.png"].lower() and "no face" in lines["cups.mp4"].lower()
     assert "broken.jpg" in lines["broken.jpg"] and "✗" in lines["broken.jpg"]
     assert "unsupported file type" in lines["notes.txt"]
-    assert "finished, 0 done, 2 failed" in job
+    assert "finished, 0 done, 3 failed" in job
     assert str(web.config.output) not in status  # the uploaded names, never the server's paths
     for line in lines.values():
         assert "\n" not in line and len(line) < 400
@@ -180,3 +184,55 @@ def test_the_grey_card_box_reaches_the_fit(web):
     assert config.tone.illuminant.reference_box == pytest.approx(box, abs=1e-4)
     assert config.tone.illuminant.reference_reflectance == 0.9
     assert config.iterations.stage2 == 10 and config.resolution == 64
+
+
+def hosted_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("hosted_app", Path(__file__).resolve().parents[1] / "app.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_app_py_is_the_hosted_demo_on_localhost_unless_on_a_space(monkeypatch, tmp_path, shared):
+    import os
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import urllib.request
+
+    for name in ("SPACE_ID", "GRADIO_SERVER_NAME", "GRADIO_SERVER_PORT"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("DEFACE_WEB_OUTPUT", str(tmp_path / "out"))
+    config = hosted_module().hosted_config()
+    assert (config.host, config.port, config.workers, config.presets[0]) == ("127.0.0.1", 7860, 1, "fast")
+    assert config.keep_jobs and config.max_file_mb <= 20
+    config.check()
+    monkeypatch.setenv("SPACE_ID", "someone/deface")
+    assert hosted_module().hosted_config().host == "0.0.0.0"
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    env = {**os.environ, "GRADIO_SERVER_PORT": str(port)}
+    env.pop("SPACE_ID")
+    process = subprocess.Popen([sys.executable, str(Path(__file__).resolve().parents[1] / "app.py")], cwd=tmp_path,
+                               env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/config", timeout=2) as response:
+                    page = json.loads(response.read())
+                break
+            except OSError:
+                assert process.poll() is None, process.stdout.read()
+                assert time.monotonic() < deadline
+                time.sleep(0.5)
+        assert page["title"] == "deface" and "3D face" in json.dumps(page["components"])
+    finally:
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(60) == 0, process.stdout.read()
+    assert (tmp_path / "out" / ".gradio").is_dir() and sorted(p.name for p in tmp_path.iterdir()) == ["out"]

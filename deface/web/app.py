@@ -244,7 +244,7 @@ class WebApp:
             return "starting a worker (loading the face model)" if starting else "waiting for a worker"
         clock = state.clock
         if clock is None or clock.stage is None:
-            return "starting"
+            return "reading the file"
         where = STAGE_WORDS.get(clock.stage, clock.stage)
         total = clock.totals.get(clock.stage)
         if total and clock.step:

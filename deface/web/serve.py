@@ -56,20 +56,22 @@ def launch(config: WebConfig):
 
 
 def serve(config: WebConfig, announce=print) -> None:
-    """Run the app until Ctrl-C or SIGTERM."""
-    app = launch(config)
-    announce(f"deface serve: http://{_shown_host(config.host)}:{config.port} (outputs in "
-             f"{Path(config.output).resolve()}; {app.service.workers} worker process(es)); Ctrl-C stops it")
+    """Run the app until Ctrl-C or SIGTERM (either one from the start: the stop is clean at any time)."""
     previous = signal.signal(signal.SIGTERM, _interrupt)
+    app = None
     try:
+        app = launch(config)
+        announce(f"deface serve: http://{_shown_host(config.host)}:{config.port} (outputs in "
+                 f"{Path(config.output).resolve()}; {app.service.workers} worker process(es)); Ctrl-C stops it")
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:
         announce("deface serve: stopping (running fits are stopped; their outputs are not written)")
     finally:
         signal.signal(signal.SIGTERM, previous)
-        app.service.close()
-        app.blocks.close()
+        if app is not None:
+            app.service.close()
+            app.blocks.close()
 
 
 def _interrupt(_signum, _frame) -> None:
