@@ -39,6 +39,13 @@ def test_the_first_fit_extrapolates_from_stage_2s_pace():
     assert clock.seconds_left(8.0) == pytest.approx(expected)
 
 
+def test_stage_3s_start_is_guessed_from_stage_2():
+    clock = FitClock(TOTALS)
+    run(clock, until=53.0)  # stage 3 has just started; stage 2 ran at 0.5 s a step
+    guess = (40 * FIRST_GUESS["stage 3"] + FIRST_GUESS["textures"] + FIRST_GUESS["writing"]) * 0.5
+    assert clock.seconds_left(53.0) == pytest.approx(guess)
+
+
 def test_stage_2s_half_size_steps_are_extrapolated_at_full_size():
     clock = FitClock(TOTALS, coarse_steps=50)
     clock.event("stage 2", 0, 0.0)

@@ -25,10 +25,11 @@ from deface.fit.config import FitConfig, to_dict
 STAGES = ("landmarks", "stage 1", "stage 2", "stage 3", "textures", "writing")
 STEPPED = ("stage 2", "stage 3")
 COARSE_COST = 0.4  # a half-size stage-2 step against a full-size one (docs/design.md, "Stage 2 coarse-to-fine")
-FIRST_GUESS = {"stage 3": 1.4, "textures": 1.5, "writing": 20.0}
+FIRST_GUESS = {"stage 3": 2.0, "textures": 2.0, "writing": 20.0}
 """Before any fit of a configuration finished: a stage-3 step, the texture completion and the writing of the outputs
-as multiples of stage 2's full-size step (the fast preset on a 2-core machine: 1.4, ~1 and 20). The stages before
-stage 2 are over by the time that step is known."""
+as multiples of stage 2's full-size step (measured on a 2-core machine: stage 3 1.4 with the fast preset's 256-texel
+maps, 2.6 with the default's 512; textures 1-3; writing about 20). The stages before stage 2 are over by the time
+that step is known."""
 MEASURED_AFTER = 3  # steps of a stage (or of its full-size part) before their own pace is trusted
 PACE_FILE = ".deface-web-paces.json"
 
@@ -128,14 +129,21 @@ class FitClock:
         if current is None:
             return None
         later = STAGES[STAGES.index(self.stage) + 1:]
-        pace = self.pace or ({stage: factor * self.full_rate for stage, factor in FIRST_GUESS.items()}
-                             if self.full_rate is not None else {})
+        pace = self._expected_pace()
         if any(stage not in pace for stage in later):
             return None
         return current + sum(pace[stage] * (self.totals[stage] if stage in STEPPED else 1) for stage in later)
 
+    def _expected_pace(self) -> dict[str, float]:
+        """The recorded pace of this configuration, else the first guess from stage 2's full-size step."""
+        if self.pace:
+            return self.pace
+        if self.full_rate is None:
+            return {}
+        return {stage: factor * self.full_rate for stage, factor in FIRST_GUESS.items()}
+
     def _current_left(self, now: float) -> float | None:
-        """Seconds left in the running stage: its measured pace, else the recorded one."""
+        """Seconds left in the running stage: its measured pace, else the expected one."""
         stage, step = self.stage, self.step
         elapsed = now - self.starts[stage]
         if stage == "stage 2":
@@ -144,9 +152,10 @@ class FitClock:
                 return measured
         elif stage == "stage 3" and step >= MEASURED_AFTER:
             return (self.totals[stage] - step) * elapsed / step
-        if self.pace is None or stage not in self.pace:
+        pace = self._expected_pace()
+        if stage not in pace:
             return None
-        planned = self.pace[stage] * (self.totals[stage] if stage in STEPPED else 1)
+        planned = pace[stage] * (self.totals[stage] if stage in STEPPED else 1)
         return max(planned - elapsed, 0.0)
 
     def _stage2_left(self, now: float, elapsed: float) -> float | None:
