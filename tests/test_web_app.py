@@ -26,7 +26,7 @@ from deface.web.uploads import box_from_corners, parse_box  # noqa: E402
 
 SCHEDULE = {"iterations": "10,10,4", "resolution": 64, "texture_size": 128}
 CLI_SCHEDULE = ["--iterations", "10,10,4", "--resolution", "64", "--texture-size", "128"]
-PHOTO = "nextface-s1.png"
+PHOTO, PHOTO2 = "nextface-s1.png", "nextface-s2.png"
 CARD = "grey card (18 %)"
 BAD = ("coffee.png", "cups.mp4", "broken.jpg", "notes.txt")
 VOLATILE = re.compile(r"\d+(\.\d+)? s\b")  # durations in the log's notes and the report
@@ -67,9 +67,9 @@ def bad_files(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def jobs(web, photos, bad_files):
-    """A job of bad files, and a photo's job queued behind it."""
+    """A job of bad files, and a job of two photos queued behind it."""
     bad = web.submit(bad_files, "fast", "", CARD, [])
-    good = web.submit([str(photos / PHOTO)], "fast", "", CARD, bad[web.jobs])
+    good = web.submit([str(photos / PHOTO), str(photos / PHOTO2)], "fast", "", CARD, bad[web.jobs])
     ids = good[web.jobs]
     waiting = good[web.status]
     wait(web, ids)
@@ -78,7 +78,7 @@ def jobs(web, photos, bad_files):
 
 def test_the_second_job_waits_and_the_page_says_so(jobs):
     _, waiting = jobs
-    assert "**Job 2** (1 file, preset fast): waiting, 1 job ahead of yours" in waiting
+    assert "**Job 2** (2 files, preset fast): waiting, 1 job ahead of yours" in waiting
 
 
 def test_faceless_broken_and_unsupported_files_get_one_line_each(web, jobs):
@@ -98,10 +98,7 @@ def test_faceless_broken_and_unsupported_files_get_one_line_each(web, jobs):
 def test_a_photo_gives_the_zip_of_deface_fit(web, jobs, photos, tmp_path):
     ids, _ = jobs
     update = web.refresh(ids, {}, None)
-    assert "1 done, 0 failed" in update[web.status]
-    dropdown = update[web.result]
-    key = dropdown.value
-    assert key and key.startswith(ids[1]) and [c[0] for c in dropdown.choices] == [f"{PHOTO} (job 2)"]
+    key = dict(update[web.result].choices)[f"{PHOTO} (job 2)"]
     shown = web.show(key, "studio", 0, 0, 0, ids)
     archive = Path(shown[web.download].value["path"])  # Gradio's copy, served from OUT/.gradio
     assert archive.is_file() and archive.is_relative_to(web.config.output / ".gradio")
@@ -139,6 +136,20 @@ def compare(name: str, ours: bytes, theirs: bytes) -> None:
         assert ours == theirs, name
 
 
+def test_a_batch_lists_its_results_and_zips_them_all(web, jobs):
+    ids, _ = jobs
+    update = web.refresh(ids, {}, None)
+    assert "**Job 2** (2 files, preset fast): finished, 2 done, 0 failed" in update[web.status]
+    assert [label for label, _ in update[web.result].choices] == [f"{PHOTO} (job 2)", f"{PHOTO2} (job 2)"]
+    assert update[web.result].value == update[web.result].choices[0][1] and update[web.results].visible
+    assert update[web.timer].active is False  # nothing left to follow
+    with zipfile.ZipFile(update[web.download_all].value["path"]) as archive:
+        folders = {name.split("/")[0] for name in archive.namelist()}
+    assert folders == {Path(PHOTO).stem, Path(PHOTO2).stem}
+    again = web.refresh(ids, update[web.known], update[web.result].value)
+    assert again[web.result] == {"__type__": "update"}  # unchanged: the page keeps its selection
+
+
 def test_the_page_shows_the_fit_and_relights_it(web, jobs):
     ids, _ = jobs
     key = web.refresh(ids, {}, None)[web.result].value
@@ -162,9 +173,10 @@ def test_the_page_shows_the_fit_and_relights_it(web, jobs):
 def test_a_job_folder_is_a_deface_fit_output_with_its_inputs_and_zips(web, jobs):
     output = web.config.output
     job = output / jobs[0][1]
-    assert {p.name for p in job.iterdir()} >= {"inputs", "nextface-s1", "nextface-s1.zip", "batch.jsonl"}
+    assert {p.name for p in job.iterdir()} >= {"inputs", "nextface-s1", "nextface-s1.zip", "nextface-s2",
+                                               "nextface-s2.zip", "all.zip", "batch.jsonl", "index.html"}
     records = [json.loads(line) for line in (job / "batch.jsonl").read_text().splitlines()]
-    assert [r["status"] for r in records] == ["done"] and records[0]["engine"] == "local"
+    assert [r["status"] for r in records] == ["done", "done"] and records[0]["engine"] == "local"
 
 
 def test_bad_requests_are_one_line(web):
@@ -201,6 +213,7 @@ def test_app_py_is_the_hosted_demo_on_localhost_unless_on_a_space(monkeypatch, t
     import socket
     import subprocess
     import sys
+    import urllib.error
     import urllib.request
 
     for name in ("SPACE_ID", "GRADIO_SERVER_NAME", "GRADIO_SERVER_PORT"):
@@ -232,7 +245,44 @@ def test_app_py_is_the_hosted_demo_on_localhost_unless_on_a_space(monkeypatch, t
                 assert time.monotonic() < deadline
                 time.sleep(0.5)
         assert page["title"] == "deface" and "3D face" in json.dumps(page["components"])
+        oversized = b"--edge\r\nContent-Disposition: form-data; name=\"files\"; filename=\"big.png\"\r\n\r\n" + \
+            bytes(21 * 1024 * 1024) + b"\r\n--edge--\r\n"
+        request = urllib.request.Request(f"http://127.0.0.1:{port}/gradio_api/upload", data=oversized,
+                                         headers={"Content-Type": "multipart/form-data; boundary=edge"})
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(request, timeout=30)
+        assert refused.value.code == 413  # the hosted demo's 20 MB limit, enforced by the server
     finally:
         process.send_signal(signal.SIGTERM)
         assert process.wait(60) == 0, process.stdout.read()
     assert (tmp_path / "out" / ".gradio").is_dir() and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_serve_usage_errors_are_one_line(tmp_path):
+    runner = CliRunner()
+    for arguments, expected in ((["--set", "nonsense=1"], "nonsense"), (["--port", "0"], "--port must be"),
+                                (["--workers", "999"], "--jobs must be"), (["--keep-jobs", "0"], "--keep-jobs")):
+        result = runner.invoke(cli, ["serve", "-o", str(tmp_path / "out"), *arguments])
+        assert result.exit_code == 2 and expected in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1
+
+
+def test_serve_without_the_web_extra_says_how_to_get_it(monkeypatch, tmp_path):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "gradio" else real(name, *a))
+    result = CliRunner().invoke(cli, ["serve", "-o", str(tmp_path)])
+    assert result.exit_code == 1 and "pip install 'deface[web]'" in result.output
+
+
+def test_serve_on_a_taken_port_is_one_line(tmp_path, shared):
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = CliRunner().invoke(cli, ["serve", "-o", str(tmp_path / "out"), "--port", str(port)])
+    assert result.exit_code == 1, result.output
+    assert f"cannot serve on 127.0.0.1:{port}" in result.output and len(result.output.strip().splitlines()) == 1

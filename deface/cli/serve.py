@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 
 from deface.cli import options
 from deface.cli.fit import EXIT_FAILED, EXIT_USAGE, report_error
@@ -45,7 +46,7 @@ def serve_command(
     the results (the same files as `deface fit`). The operator's --iterations, --resolution, --texture-size and --set
     apply to every fit, on top of the preset chosen in the page."""
     if importlib.util.find_spec("gradio") is None:  # not imported here: serve.py sets its environment first
-        console.print(f"[red]error:[/red] {WEB_EXTRA}")
+        console.print(f"[red]error:[/red] {escape(WEB_EXTRA)}")
         raise typer.Exit(EXIT_FAILED)
     from deface.models.registry import require_face_model
     from deface.web.config import WebConfig
@@ -68,5 +69,6 @@ def serve_command(
     try:
         serve(config, announce=console.print)
     except OSError as error:  # the port is taken, the address cannot be bound
-        report_error(OSError(f"cannot serve on {host}:{port} ({error.strerror or error})"))
+        reason = error.strerror or str(error).split(".")[0]
+        report_error(OSError(f"cannot serve on {host}:{port} ({reason}); another --port or --host?"))
         raise typer.Exit(EXIT_FAILED) from None

@@ -48,10 +48,14 @@ def launch(config: WebConfig):
     app = WebApp(config)
     app.blocks.queue(default_concurrency_limit=1)
     app.blocks.delete_cache = CACHE_CLEANING
-    app.blocks.launch(server_name=config.host, server_port=config.port, share=False, inbrowser=False,
-                      prevent_thread_lock=True, quiet=True, max_file_size=int(config.max_file_mb * 1024 * 1024),
-                      allowed_paths=[str(output)], ssr_mode=False, mcp_server=False, css=PAGE_CSS,
-                      footer_links=["settings"])
+    try:
+        app.blocks.launch(server_name=config.host, server_port=config.port, share=False, inbrowser=False,
+                          prevent_thread_lock=True, quiet=True, max_file_size=int(config.max_file_mb * 1024 * 1024),
+                          allowed_paths=[str(output)], ssr_mode=False, mcp_server=False, css=PAGE_CSS,
+                          footer_links=["settings"])
+    except BaseException:  # the port is taken, the address cannot be bound, an interrupt: no queue left behind
+        app.service.close()
+        raise
     return app
 
 
