@@ -19,12 +19,13 @@ WEB_EXTRA = "deface serve needs the web extra: pip install 'deface[web]' (Gradio
 
 
 def register(app: typer.Typer) -> None:
-    app.command("serve")(serve_command)
+    app.command("serve", epilog=options.settings_help())(serve_command)
 
 
 def serve_command(
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the uploads, fits, zips and Gradio's "
-                                         "cache (created); the app writes nowhere else.")] = Path("deface-web"),
+                                         "files (created); the app's files go nowhere else (docs/web.md).")]
+    = Path("deface-web"),
     host: Annotated[str, typer.Option(help="Address to listen on; 0.0.0.0 opens it to other machines.")]
     = "127.0.0.1",
     port: Annotated[int, typer.Option(help="Port to listen on.")] = 7860,
