@@ -6,6 +6,7 @@ re-renders the loaded fit; the grey card's box reaches the fit's config. The fit
 from __future__ import annotations
 
 import json
+import os
 import re
 import time
 import zipfile
@@ -35,12 +36,15 @@ VOLATILE = re.compile(r"\d+(\.\d+)? s\b")  # durations in the log's notes and th
 @pytest.fixture(scope="module")
 def web(tmp_path_factory, shared):
     output = tmp_path_factory.mktemp("web")
+    saved = dict(os.environ)
     offline_environment(output)  # before Gradio is imported: its uploads and copies go under OUT
     from deface.web.app import WebApp
 
     page = WebApp(WebConfig(output, workers=1, **SCHEDULE))
     yield page
     page.service.close()
+    os.environ.clear()
+    os.environ.update(saved)
 
 
 def wait(page, jobs: list[str], seconds: float = 300) -> None:
@@ -208,7 +212,6 @@ def hosted_module():
 
 
 def test_app_py_is_the_hosted_demo_on_localhost_unless_on_a_space(monkeypatch, tmp_path, shared):
-    import os
     import signal
     import socket
     import subprocess
@@ -276,9 +279,10 @@ def test_serve_without_the_web_extra_says_how_to_get_it(monkeypatch, tmp_path):
     assert result.exit_code == 1 and "pip install 'deface[web]'" in result.output
 
 
-def test_serve_on_a_taken_port_is_one_line(tmp_path, shared):
+def test_serve_on_a_taken_port_is_one_line(tmp_path, shared, monkeypatch):
     import socket
 
+    monkeypatch.setattr(os, "environ", dict(os.environ))  # serve sets Gradio's environment: this test's only
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()

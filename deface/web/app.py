@@ -187,11 +187,12 @@ class WebApp:
         """The timer's tick: the status of this page's jobs, and the finished results as they come."""
         done = self._results(jobs)
         keys = [key for key, _ in done]
+        listed = [list(pair) for pair in done]
         batch_zip = self._latest_batch_zip(jobs)
-        update = {self.status: self.status_text(jobs), self.known: {"results": keys, "zip": batch_zip},
+        update = {self.status: self.status_text(jobs), self.known: {"results": listed, "zip": batch_zip},
                   self.timer: gr.Timer(active=bool(self._unfinished(jobs))), self.result: gr.skip(),
                   self.results: gr.skip(), self.download_all: gr.skip()}
-        if keys != known.get("results"):
+        if listed != known.get("results"):  # a new result, or labels that now name their job
             value = selected if selected in keys else (keys[0] if keys else None)
             update[self.result] = gr.Dropdown(choices=[(label, key) for key, label in done], value=value)
             update[self.results] = gr.Column(visible=bool(keys))
