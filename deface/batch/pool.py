@@ -18,6 +18,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -118,7 +119,10 @@ class LocalPool:
         process = self._context.Process(target=_worker_main, args=(child, self.task, self.warm, self.warm_args,
                                                                        self.stderr),
                                         name=f"deface-worker-{number}", daemon=True)
-        previous = signal.getsignal(signal.SIGINT)
+        # Only the main thread may set handlers; a pool run from another thread (deface serve) starts its workers
+        # with the caller's SIGINT handling until their first line ignores it.
+        main = threading.current_thread() is threading.main_thread()
+        previous = signal.getsignal(signal.SIGINT) if main else None
         if previous is not None:
             signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited through exec: Ctrl-C never hits bootstrap
         try:

@@ -19,6 +19,7 @@ SUBCOMMAND_MODULES = (
     "deface.cli.bench",
     "deface.cli.demo",
     "deface.cli.relight",
+    "deface.cli.serve",
 )
 
 for _name in SUBCOMMAND_MODULES:
