@@ -87,3 +87,18 @@ def test_detail_ratio_is_the_share_of_the_photos_fine_contrast(texture, region):
     assert detail_ratio(ndimage.gaussian_filter(photo, (2, 2, 0)), photo, region) < 0.5
     flat = np.full_like(photo, 0.5)
     assert detail_ratio(flat, photo, region) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_edge_fringe_sees_colour_along_the_shadow_edge_only():
+    from deface.eval.uv_measure import EDGE_BAND, edge_fringe
+
+    rng = np.random.default_rng(5)
+    target = np.array([0.5, 0.35, 0.25]) * rng.uniform(0.9, 1.0, (256, 256, 1))
+    shadow = np.zeros((256, 256))
+    shadow[:, :128] = 1.0  # the shadow's edge runs down column 128
+    region = np.ones((256, 256), bool)
+    assert edge_fringe(target * [1.3, 1.0, 0.8], target, shadow, region)["fringe"] == pytest.approx(0, abs=1e-9)
+    source = target.copy()
+    source[:, 128 - EDGE_BAND:128 + EDGE_BAND] *= np.exp(0.1 * np.array([1.0, -1.0, 0.0]) / np.sqrt(2))
+    scores = edge_fringe(source, target, shadow, region)
+    assert scores["edge"] > 5 and scores["rest"] < 0.5 and scores["fringe"] > 5

@@ -24,8 +24,12 @@ def test_deface_differs_from_paper_only_where_benchmarks_md_says_why():
                        "iterations.stage2_coarse_share": presets.STAGE2_COARSE_SHARE,
                        "learning_rates.stage3_diffuse_level": presets.DIFFUSE_STEP_LEVEL,
                        "weights.diffuse_level": presets.DIFFUSE_STEP_LEVEL,
-                       "weights.smooth_departure": presets.SMOOTH_DEPARTURE,
-                       "iterations.stage3_holdout": presets.STAGE3_HOLDOUT}
+                       "iterations.stage3_holdout": presets.STAGE3_HOLDOUT,
+                       "weights.landmarks": presets.STAGE2_LANDMARKS, "weights.landmark_units": "face",
+                       "priors.global_prior": False, "priors.local_prior": False,
+                       "shading_evidence.strength": presets.SHADING_EVIDENCE,
+                       "skin_classifier.hull_margin": presets.SKIN_CLASSIFIER.hull_margin,
+                       "skin_classifier.beard_zone": presets.SKIN_CLASSIFIER.beard_zone}
 
 
 def test_mean_skin_is_deface_without_the_skin_tone_work():
@@ -34,8 +38,7 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
     assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False,
                        "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3,
                        "iterations.stage2_coarse_share": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
-                       "weights.smooth_departure": 0.0, "iterations.stage3_holdout": 0.0,
-                       "weights.diffuse_level": 0.0}
+                       "iterations.stage3_holdout": 0.0, "weights.diffuse_level": 0.0}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():

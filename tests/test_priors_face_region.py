@@ -8,11 +8,14 @@ import torch
 
 from deface.priors.bisenet import FACE_CLASSES, BiSeNet, BiSeNetFaceParser, MissingWeightsError, parsing_box
 from deface.priors.face_region import (
+    SkinClassifierConfig,
     SkinColourClassifier,
     _hull_mask,
     _mahalanobis,
+    beard_zone_mask,
     chromaticity,
     clipped_chroma_distance,
+    enclosed_patches,
     load_face_region_classifier,
 )
 
@@ -150,3 +153,44 @@ def test_bisenet_missing_checkpoint(tmp_path, monkeypatch):
         BiSeNetFaceParser(tmp_path / "79999_iter.pth")
     classifier, description = load_face_region_classifier(tmp_path)
     assert isinstance(classifier, SkinColourClassifier) and "BiSeNet off" in description
+
+
+def test_enclosed_pigment_is_face_and_hair_from_the_border_is_not():
+    """A birthmark and moles enclosed by skin are face (face parsers label them skin); a hair band that reaches
+    the region's border is not; a patch larger than ``enclosed_area`` of the face is not either."""
+    image, coverage, _, hair = synthetic_face()
+    ys, xs = np.mgrid[:96, :96]
+    mark = (ys - 40) ** 2 + (xs - 60) ** 2 <= 4**2  # a reddish-brown birthmark inside the skin
+    mole = (ys - 70) ** 2 + (xs - 36) ** 2 <= 2**2
+    image[mark] = np.array([0.55, 0.25, 0.18])
+    image[mole] = np.array([0.2, 0.12, 0.08])
+    h = SkinColourClassifier()(image, coverage)
+    assert h[mark].mean() > 0.8 and h[mole].mean() > 0.8
+    assert h[hair].mean() < 0.2
+    small = SkinColourClassifier(SkinClassifierConfig(enclosed_area=0.001))(image, coverage)
+    assert small[mark].mean() < 0.3
+
+
+def test_enclosed_patches_topology():
+    region = np.zeros((40, 40), bool)
+    region[5:35, 5:35] = True
+    skin = region.copy()
+    skin[15:19, 15:19] = False  # enclosed
+    skin[5:10, 25:30] = False  # reaches the region's border
+    patches = enclosed_patches(skin, region, 0.05)
+    assert patches[15:19, 15:19].all() and not patches[5:10, 25:30].any()
+    assert not enclosed_patches(skin, region, 0.01).any()  # 16 texels > 1 % of 900
+
+
+def test_beard_zone_is_the_lower_face_below_the_nose(photos):
+    from deface.io.images import load_image
+    from deface.landmarks.detect import detect_landmarks
+
+    image = load_image(photos / "nextface-s1.png")
+    points = detect_landmarks(image).points[:, :2]
+    zone = beard_zone_mask(points, image.shape[:2])
+    chin, nose_tip, forehead = points[152], points[1], points[10]
+    assert zone[int(chin[1]) - 3, int(chin[0])]  # just above the chin's bottom
+    assert not zone[int(nose_tip[1]) - 3, int(nose_tip[0])]  # the nose is above the zone
+    assert not zone[int(forehead[1]) + 3, int(forehead[0])]
+    assert not beard_zone_mask(points[:68], image.shape[:2]).any()  # not a MediaPipe layout: no zone

@@ -91,3 +91,22 @@ def test_phong_filter_properties():
 def test_gradient_matches_finite_differences():
     d = torch.randn(4, 3, dtype=torch.float64, requires_grad=True)
     assert torch.autograd.gradcheck(lambda v: sh_basis(torch.nn.functional.normalize(v, dim=-1), 7), (d,))
+
+
+def test_non_negative_keeps_a_positive_light_and_clamps_a_negative_lobe():
+    from deface.render.sh import _radiance_basis, non_negative, white_light
+
+    light = white_light(9)
+    assert non_negative(light) is light  # nowhere negative: unchanged
+    lobe = torch.zeros(1, 81, 3)
+    lobe[0, 0] = 1.0
+    lobe[0, 2] = -2.5  # a constant minus a strong lobe towards +z: negative radiance around +z
+    basis, _ = _radiance_basis(9)
+    before = (basis.float() @ lobe[0])[:, 0]
+    after = (basis.float() @ non_negative(lobe)[0])[:, 0]
+    assert before.min() < -0.5
+    assert after.min() > -0.05 * before.max()  # the band-limited clamp rings a little, no more
+    away = before > 0.2  # where the light was clearly positive it keeps most of its radiance
+    assert torch.corrcoef(torch.stack([before[away], after[away]]))[0, 1] > 0.95
+    clamped = non_negative(lobe.double().requires_grad_())
+    clamped.sum().backward()  # differentiable

@@ -164,6 +164,9 @@ def _mean_uv(uv: list[dict]) -> dict:
     for key in ("speckle", "detail"):
         values = [item[key] for item in uv if key in item]
         mean[key] = sum(values) / len(values) if len(values) == len(uv) else None
+    fringes = [item["edge_fringe"]["fringe"] for item in uv if "edge_fringe" in item]
+    fringes = [value for value in fringes if value == value]  # NaN: too few edge texels seen
+    mean["edge_fringe"] = sum(fringes) / len(fringes) if fringes else None
     return mean
 
 
@@ -195,14 +198,15 @@ def _row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair])
 def _uv_row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair]) -> str:
     timing_path = out_dir / name / "timing.json"
     if not timing_path.exists() or not _fitted_now(out_dir, name, schedule, pairs):
-        return f"| {label} | not run with the current configuration | | | | | |"
+        return f"| {label} | not run with the current configuration | | | | | | |"
     uv = json.loads(timing_path.read_text()).get("uv")
     if uv is None:
-        return f"| {label} | not measured (cached pairs predate the UV measure) | | | | | |"
+        return f"| {label} | not measured (cached pairs predate the UV measure) | | | | | | |"
     synthesis = json.loads((out_dir / name / "metrics.json").read_text())["mean"]["target"]["face"]["psnr"]
     detail = f"{uv['detail']:.2f}" if uv.get("detail") is not None else "-"
+    fringe = f"{uv['edge_fringe']:.2f}" if uv.get("edge_fringe") is not None else "-"
     return (f"| {label} | {uv['psnr']:.2f} | {uv['ssim']:.3f} | {uv['lpips']:.2f} | {uv['speckle']:.2f}"
-            f" | {detail} | {synthesis:.2f} |")
+            f" | {detail} | {fringe} | {synthesis:.2f} |")
 
 
 def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str, limit: int | None = None) -> str:
@@ -237,9 +241,11 @@ def report_markdown(out_dir: Path, pairs_dir: Path, schedule: str, command: str,
         "UV PSNR / SSIM / LPIPS x100: the source fit's diffuse map against the target fit's (same person and pose,"
         " shadowed vs clean photo), over the texels both fits saw within 60 degrees inside h; speckle: the maps'"
         " high-frequency contrast beyond the photo's at that scale, % (0 = none); detail: the maps' fine contrast"
-        " as a share of the photo's (1 = all of it; docs/textures.md);"
-        " synthesis = target synthesis PSNR face, as above.", "",
-        "| | UV PSNR | UV SSIM | UV LPIPS | speckle | detail | synthesis PSNR face |\n|---|---|---|---|---|---|---|",
+        " as a share of the photo's (1 = all of it; docs/textures.md); edge fringe: the chroma the shadow's edge"
+        " left in the source's map beyond the two maps' chroma difference elsewhere, x100 (deface/eval/uv_measure.py;"
+        " 0 = none); synthesis = target synthesis PSNR face, as above.", "",
+        "| | UV PSNR | UV SSIM | UV LPIPS | speckle | detail | edge fringe | synthesis PSNR face |\n"
+        "|---|---|---|---|---|---|---|---|",
         *[_uv_row(out_dir, label, name, schedule, pairs) for label, name in UV_TABLE[1]], ""]
     lines.append(f"_Written {time.strftime('%Y-%m-%d %H:%M')}._")
     return "\n".join(lines) + "\n"

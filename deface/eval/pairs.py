@@ -6,8 +6,9 @@ Layout (one folder per pair, pairs sorted by name; the authors' code used unsort
     DIR/<name>/source/<frames>              a folder of frames (video pair), natural order
     DIR/<name>/target.png | target.jpg | target/<frames>
 
-Other files in a pair folder (e.g. ``shadow_mask.png`` of the synthetic benchmark) are ignored, and
-top-level files (``manifest.json``) too.
+``shadow_mask.png`` (the synthetic benchmark's: white where the source photo is shadowed, in its pixels) is read
+when present: the UV measures score the colour the shadow's edge leaves in the map. Other files and top-level
+files (``manifest.json``) are ignored.
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ class Pair:
     """Source image(s): one path for an image pair, the sorted frames for a video pair."""
     target: list[Path]
     """Target image(s), same convention."""
+    shadow_mask: Path | None = None
+    """Where the source photo is shadowed (``shadow_mask.png``; None when the pair has none)."""
 
 
 def natural_key(text: str) -> list:
@@ -68,5 +71,6 @@ def read_pairs(directory: str | Path) -> list[Pair]:
         source, target = _read_side(pair_dir, "source"), _read_side(pair_dir, "target")
         if (pair_dir / "source").is_dir() != (pair_dir / "target").is_dir():
             raise ValueError(f"pair {pair_dir.name!r}: one side is a frames folder, the other an image")
-        pairs.append(Pair(pair_dir.name, source, target))
+        mask = pair_dir / "shadow_mask.png"
+        pairs.append(Pair(pair_dir.name, source, target, mask if mask.is_file() else None))
     return pairs

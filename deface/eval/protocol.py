@@ -19,7 +19,7 @@ from deface.eval import identity
 from deface.eval.metrics import composite, mean_scores, score_images
 from deface.eval.pairs import Pair
 from deface.eval.report import PairScores, ReportRow
-from deface.eval.uv_measure import SEEN, both_seen, detail_ratio, speckle, uv_consistency
+from deface.eval.uv_measure import SEEN, both_seen, detail_ratio, edge_fringe, speckle, uv_consistency
 from deface.export.files import save_png
 from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
@@ -85,18 +85,31 @@ def evaluate_pair(pair: Pair, config: FitConfig, folder: Path, models_dir=None, 
     images = _save_images(folder, source, target, source_outputs[0], swap_outputs[0])
     scores = PairScores(pair.name, source_scores, swap_scores)
     row = ReportRow(pair.name, images, {"source": source_scores, "target": swap_scores})
+    shadow = load_image(pair.shadow_mask)[..., 0] if pair.shadow_mask is not None else None
     return PairOutcome(scores, row, seconds, {"source": _albedo_ita(source), "target": _albedo_ita(target)},
-                       uv_scores(source, target))
+                       uv_scores(source, target, shadow))
 
 
-def uv_scores(source: FitOutput, target: FitOutput) -> dict:
-    """The two fits' diffuse maps compared in UV space, and their speckle (mean of both fits)."""
+def uv_scores(source: FitOutput, target: FitOutput, shadow: np.ndarray | None = None) -> dict:
+    """The two fits' diffuse maps compared in UV space, their speckle (mean of both fits), and with the source
+    photo's shadow mask ``shadow`` [H, W] the colour its edge left in the source's map (``edge_fringe``)."""
     region = both_seen(source.seen, target.seen)
-    srgb = [linear_to_srgb(_np(fit.textures.diffuse).clip(0, 1)) for fit in (source, target)]
+    linear = [_np(fit.textures.diffuse).clip(0, 1) for fit in (source, target)]
     details = [fit_detail(fit) for fit in (source, target)]
-    return {"consistency": uv_consistency(*srgb, region), "texels": int(region.sum()),
-            "speckle": float(np.mean([d["speckle"] for d in details])),
-            "detail": float(np.mean([d["detail"] for d in details]))}
+    scores = {"consistency": uv_consistency(*(linear_to_srgb(m) for m in linear), region),
+              "texels": int(region.sum()), "speckle": float(np.mean([d["speckle"] for d in details])),
+              "detail": float(np.mean([d["detail"] for d in details]))}
+    if shadow is not None:
+        working = _working_size(shadow, source.frames[0].photo_srgb.shape[:2])
+        scores["edge_fringe"] = edge_fringe(*linear, unwrap(working[..., None], source.views[0])[..., 0], region)
+    return scores
+
+
+def _working_size(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A mask in the photo's pixels resampled to the fit's working frame [H, W] (area average)."""
+    from PIL import Image
+
+    return np.asarray(Image.fromarray((mask * 255).astype(np.uint8)).resize(shape[::-1], Image.BILINEAR)) / 255.0
 
 
 def fit_detail(result: FitOutput) -> dict[str, float]:

@@ -13,6 +13,12 @@
   >= :data:`SEEN`, eroded by 2 texels (the region's border is not detail).
 - **Detail**: sqrt(E(texture) / E(photo)), the map's fine contrast as a share of the photo's: 1 keeps all of
   it, well below 1 is the prior with a faint layer of the person's detail (stubble, brows, wrinkles).
+- **Edge fringe**: the colour a cast shadow's edge leaves in the map fitted from the shadowed photo. Where the
+  edge of the shadow (its mask read in UV through the source fit's view) runs, within :data:`EDGE_BAND` texels
+  of it, the RMS of the chroma of log(source map / target map), the two maps matched by one gain per channel
+  over the texels both saw; x100 (red-green and yellow-blue axes, as ``deface bench albedo``'s colour noise).
+  Over the rest of the texels both saw the same figure says how much the two maps' colour differs anyway: the
+  fringe is the edge's excess over it. 0: the edge left no colour.
 """
 
 from __future__ import annotations
@@ -25,6 +31,9 @@ from deface.eval.metrics import score_images
 SEEN = 0.5  # seen at least this squarely (within 60 degrees, inside h) by a fit
 SPECKLE_SIGMA = 1.0  # texels: the scale of per-texel noise
 MIN_TEXELS = 64  # fewer texels in a region than this: no score
+EDGE_BAND = 2  # texels either side of a shadow's edge in UV (at 256²) that the edge fringe reads
+CHROMA_AXES = np.array([[1.0, -1.0, 0.0], [0.5, 0.5, -1.0]]) / np.array([[np.sqrt(2)], [np.sqrt(1.5)]])
+"""Red-green and yellow-blue unit axes, orthogonal to grey, in log RGB."""
 
 
 def both_seen(seen_a: np.ndarray, seen_b: np.ndarray) -> np.ndarray:
@@ -70,3 +79,23 @@ def detail_ratio(diffuse_linear: np.ndarray, photo_in_uv: np.ndarray, region: np
     photo = relative_detail_energy(photo_in_uv, region)
     ratio = relative_detail_energy(diffuse_linear, region) / photo if photo > 0 else float("nan")
     return float(np.sqrt(ratio)) if np.isfinite(ratio) else float("nan")
+
+
+def chroma_rms(log_ratio: np.ndarray, region: np.ndarray) -> float:
+    """RMS over ``region`` of the chroma (:data:`CHROMA_AXES`) of a log-RGB ratio [Ht, Wt, 3], x100."""
+    chroma = log_ratio[region] @ CHROMA_AXES.T
+    return float(100 * np.sqrt((chroma ** 2).sum(-1).mean())) if region.sum() >= MIN_TEXELS else float("nan")
+
+
+def edge_fringe(source: np.ndarray, target: np.ndarray, shadow: np.ndarray, region: np.ndarray) -> dict:
+    """The module doc's edge fringe of two linear diffuse maps [Ht, Wt, 3] and the shadow read in UV [Ht, Wt]
+    (> 0.5 in shadow), over ``region``: {"edge": at the edge, "rest": elsewhere, "fringe": edge - rest}."""
+    scale = max(1, round(source.shape[0] / 256))  # the band's texels at 256²
+    inside = shadow > 0.5
+    band = ndimage.binary_dilation(inside, iterations=EDGE_BAND * scale) & \
+        ~ndimage.binary_erosion(inside, iterations=EDGE_BAND * scale) & region
+    log_source, log_target = (np.log(np.maximum(m, 1e-3)) for m in (source, target))
+    gain = np.median((log_target - log_source)[region], axis=0) if region.any() else 0.0
+    ratio = log_source + gain - log_target
+    edge, rest = chroma_rms(ratio, band), chroma_rms(ratio, region & ~band)
+    return {"edge": edge, "rest": rest, "fringe": edge - rest, "texels": int(band.sum())}

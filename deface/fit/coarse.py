@@ -98,7 +98,8 @@ def coarse_context(context: StageContext) -> StageContext:
     detected = to_half(inputs.landmarks.detected, size)
     coarse_inputs = FitInputs(
         coarse_target,
-        LandmarkTarget(inputs.landmarks.correspondence, detected, inputs.landmarks.weights, pixel_scale=SCALE),
+        LandmarkTarget(inputs.landmarks.correspondence, detected, inputs.landmarks.weights, pixel_scale=SCALE,
+                       face_size=inputs.landmarks.face_size, units=inputs.landmarks.units),
         tuple(_resample_map(h) for h in inputs.face_classifier),
         _coarse_scene_light(inputs.scene_light),
     )

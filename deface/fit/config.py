@@ -14,7 +14,9 @@ from types import UnionType
 from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 
 from deface.models.registry import TONE_AXIS
+from deface.priors.face_region import SkinClassifierConfig
 from deface.priors.illuminant import IlluminantConfig
+from deface.priors.shading_evidence import ShadingEvidenceConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 
@@ -55,6 +57,11 @@ class DecoupleConfig:
     clipped_as_bound: bool = False
     """L_pho takes a clipped channel of the photo (sRGB >= 0.98) as a lower bound, not a value: a render above
     it costs nothing (deface/losses/photometric.py). Off: the paper's loss."""
+    stage2_robust_scale: float = 0.0
+    """Stage 2's L_pho counts a pixel's miss |d| as c I log(1 + |d| / (c I)) with c this value and I the photo's
+    (deface/losses/photometric.py ``saturated``): as |d| up to a few c, ever less beyond. Stage 2's albedo model
+    has no room for a beard, a birthmark or make-up; under L1 (0, the paper's) they pull the lights as hard as
+    any skin, and the lights darken the chin to explain a goatee."""
     hidden: tuple[int, ...] = (16, 64, 64)
     """Hidden widths of f (the authors' 3->16->64->64->n)."""
     fourier_frequencies: int = 0
@@ -72,7 +79,11 @@ class Weights:
     photometric: float = 2e3
     """w0: L_pho, the masked photometric loss."""
     landmarks: float = 1e-3
-    """w1: L_lan in stage 2."""
+    """w1: L_lan in stage 2 (mean squared distance in ``landmark_units``)."""
+    landmark_units: Literal["pixels", "face"] = "pixels"
+    """Units of L_lan's distances in stage 2: working pixels (the authors' code: the balance with L_pho, a mean
+    over pixels, then depends on the face's size in pixels), or the detected face's size (its landmarks' box
+    diagonal), which keeps the balance whatever the working size and the face's share of the image."""
     segmentation: float = 1.5e2
     """w2: L_seg (g against the face-region classifier h)."""
     area: float = 0.5
@@ -289,6 +300,11 @@ class RenderSettings:
     """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
     render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between
     pixel centres (the paper's path tracer averaged several samples per pixel too). 1 = one sample."""
+    non_negative_lights: bool = True
+    """Each SH light is rendered with its negative radiance clamped (deface/render/sh.py ``non_negative``), as the
+    authors' renderer (NextFace) clamps the environment map it renders the SH through. Off: the SH as it is, whose
+    negative lobes let a light subtract radiance (a fitted light darkened a chin through its specular reflection
+    to explain a beard)."""
     render_blur: bool = False
     """L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
     their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
@@ -331,6 +347,11 @@ class FitConfig:
     texel, so no texel is freer than the photos make it."""
     completion: CompletionConfig = field(default_factory=CompletionConfig)
     """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
+    skin_classifier: SkinClassifierConfig = field(default_factory=SkinClassifierConfig)
+    """The offline face-region classifier h (deface/priors/face_region.py), used without BiSeNet's weights."""
+    shading_evidence: ShadingEvidenceConfig = field(default_factory=ShadingEvidenceConfig)
+    """Which pixels stage 2 fits its lights, masks and geometry to (deface/priors/shading_evidence.py): less
+    where the photo has hair-like fine texture."""
     render: RenderSettings = field(default_factory=RenderSettings)
     """The renderer's settings."""
     seed: int = 0

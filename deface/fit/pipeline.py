@@ -169,7 +169,8 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     result = fit_landmarks(model, corr, target.landmarks, target.size, config.stage1, config.iterations.stage1)
     log.stop("stage 1")
     landmarks = LandmarkTarget(corr, torch.as_tensor(result.landmarks_2d, dtype=torch.float32),
-                               torch.as_tensor(corr.weights, dtype=torch.float32))
+                               torch.as_tensor(corr.weights, dtype=torch.float32),
+                               face_size=_face_sizes(target), units=config.weights.landmark_units)
     scene = SceneParameters(
         identity=torch.as_tensor(result.identity), expression=torch.as_tensor(result.expression),
         rotation=torch.as_tensor(result.rotation), translation=torch.as_tensor(result.translation),
@@ -192,6 +193,12 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     return StageContext.create(inputs, face, decoupling, config, log), {"face_parsing": note}
 
 
+def _face_sizes(target: FitTarget) -> torch.Tensor:
+    """[T] each frame's detected face size in working pixels: the diagonal of its landmarks' box."""
+    boxes = [np.ptp(landmarks.points[:, :2], axis=0) for landmarks in target.landmarks]
+    return torch.tensor([float(np.hypot(*box)) for box in boxes], dtype=torch.float32)
+
+
 def _supported_tone(model, config: FitConfig, log: FitLog) -> FitConfig:
     """``config`` without ``tone.free_tone`` for a model with no tone axis (BFM's AlbedoMM), said in the log."""
     supported = supports_free_tone(config)
@@ -209,7 +216,7 @@ def _initial_tone(model, config: FitConfig) -> float:
 def _face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, models_dir,
                      log: FitLog) -> tuple[tuple[torch.Tensor, ...], str]:
     """h per frame from the stage-1 face, and which parser made it (for the run record)."""
-    classifier, note = _classifier(config.decouple.face_region_source, models_dir)
+    classifier, note = _classifier(config.decouple.face_region_source, models_dir, config.skin_classifier)
     log.info(f"face region h: {note}")
     found = []
     for frame in range(target.num_frames):
@@ -230,7 +237,7 @@ def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig):
     return estimate_illuminant(target.frames_srgb, faces, config.tone.illuminant)
 
 
-def _classifier(source: str, models_dir):
+def _classifier(source: str, models_dir, skin=None):
     """The face-region classifier h for a config's ``face_region_source`` and a note for the run record."""
     if source == "none":
         return (lambda image, coverage, landmarks: coverage), "none (h = render mask)"
@@ -238,4 +245,4 @@ def _classifier(source: str, models_dir):
         from deface.priors.bisenet import BiSeNetFaceParser
 
         return BiSeNetFaceParser.from_models_dir(models_dir), "BiSeNet face parsing (79999_iter.pth)"
-    return load_face_region_classifier(models_dir, prefer="bisenet" if source == "auto" else "skin")
+    return load_face_region_classifier(models_dir, prefer="bisenet" if source == "auto" else "skin", skin=skin)

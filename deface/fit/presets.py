@@ -58,6 +58,8 @@ from deface.fit.config import (
     override,
 )
 from deface.models.albedo_prior import AlbedoPriorConfig
+from deface.priors.face_region import SkinClassifierConfig
+from deface.priors.shading_evidence import ShadingEvidenceConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 
@@ -118,18 +120,28 @@ TEXTURE_LEVELS = 5
 # 31.33 dB, LPIPS 8.50 -> 7.87, target synthesis 26.76 -> 26.73 (BENCHMARKS.md "UV-space textures").
 DIFFUSE_STEP_LEVEL = AlbedoPriorConfig().skin_rgb[1]
 
-# Stage 3 leaves the diffuse map's smooth departures from T^0 (beyond one gain per channel) to T^0 in `deface`
-# (Weights.smooth_departure, deface/losses/texture.py). On the 8 shadow pairs (quick schedule) weights 0 / 100 /
-# 1000 / 3000 gave UV consistency 28.13 / 28.69 / 29.57 / 29.97 dB, target synthesis 26.22 / 26.23 / 26.16 / 26.13,
-# the maps' detail 0.89 / 0.88 / 0.89 / 0.87 of the photo's: 1000 keeps the detail (BENCHMARKS.md).
-SMOOTH_DEPARTURE = 1000.0
-
 # Stage 3 holds out 10 % of the face's pixels and keeps the step that predicts them best in `deface` and `fast`
 # (Iterations.stage3_holdout, deface/fit/holdout.py). On the 8 shadow pairs (quick schedule): target synthesis
 # 26.16 -> 26.66 dB, UV consistency 29.57 -> 31.05 dB, speckle 1.71 -> 0; on the renders of known albedo the
 # maps are closer to the true albedo (gain-matched PSNR 35.0 -> 35.6 dB) with less of its fine detail's
 # amplitude (BENCHMARKS.md "UV-space textures").
 STAGE3_HOLDOUT = 0.1
+
+
+# Stage 2's L_lan weight in `deface` and `fast`, its distances in units of the face's size (Weights.landmark_units).
+# With the paper's 1e-3 (squared working pixels) L_pho pulled the ICT blendshapes to their bounds (mouthClose 1 with
+# the jaw shut folds the lips over the nose): a 15-px RMS landmark error and the photo's beard mapped onto the
+# nose's texels. On the renders of known geometry (../shared/data/detail-synth/mesh.obj) this weight keeps
+# stage 1's accuracy (docs/textures.md "Geometry").
+STAGE2_LANDMARKS = 1e4
+
+# Stage 2 in `deface` weighs pixels down where the photo has hair-like fine texture (deface/priors/shading_evidence.py):
+# its albedo model has no room for a beard, so the lights and masks explained it (docs/textures.md "Dark albedo").
+SHADING_EVIDENCE = 3.0
+
+# The offline face region h in `deface`: the hull of the landmarks grown by 6 % of the face's size (the skin model
+# sets the face's edge), and the beard zone counted as face as face parsers count it (deface/priors/face_region.py).
+SKIN_CLASSIFIER = SkinClassifierConfig(hull_margin=0.06, beard_zone=True)
 
 
 def _deface() -> FitConfig:
@@ -144,7 +156,10 @@ def _deface() -> FitConfig:
         completion=CompletionConfig(enabled=True),
         tone=ToneConfig(free_tone=True, scene_light_prior=True, learning_rate=TONE_STEP),
         learning_rates=LearningRates(stage3_diffuse_level=DIFFUSE_STEP_LEVEL),
-        weights=Weights(smooth_departure=SMOOTH_DEPARTURE, diffuse_level=DIFFUSE_STEP_LEVEL),
+        weights=Weights(diffuse_level=DIFFUSE_STEP_LEVEL, landmarks=STAGE2_LANDMARKS, landmark_units="face"),
+        priors=PriorConfig(global_prior=False, local_prior=False),
+        shading_evidence=ShadingEvidenceConfig(strength=SHADING_EVIDENCE),
+        skin_classifier=SKIN_CLASSIFIER,
     )
 
 
@@ -152,8 +167,7 @@ def _deface_mean_skin() -> FitConfig:
     return override(_deface(), preset="deface-mean-skin", tone=ToneConfig(),
                     **{"decouple.clipped_as_bound": False, "iterations.stage2_coarse_share": 0.0,
                        "iterations.stage3_holdout": 0.0,
-                       "learning_rates.stage3_diffuse_level": 0.0, "weights.smooth_departure": 0.0,
-                       "weights.diffuse_level": 0.0})
+                       "learning_rates.stage3_diffuse_level": 0.0, "weights.diffuse_level": 0.0})
 
 
 def _fast() -> FitConfig:

@@ -7,7 +7,7 @@ priors; at iter_0 ACE keeps the lights whose masks are large enough. Focal lengt
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -15,9 +15,10 @@ from deface.decouple.ace import light_areas
 from deface.fit.coarse import can_coarsen, coarse_context, half_size
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
-from deface.fit.state import FrameRender, LossTerms, StageContext
+from deface.fit.state import FrameRender, LossTerms, StageContext, compose_face
 from deface.losses import decouple as decouple_losses
 from deface.models.tone_neutral import ToneBoxColours, keep_tone_
+from deface.priors.shading_evidence import texture_weight
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,7 @@ class Stage2Result:
 
 def run_stage2(context: StageContext) -> Stage2Result:
     """Run stage 2 in place on ``context.scene`` / ``context.decoupling``."""
+    context = _weighted_by_evidence(context)
     config, scene, decoupling = context.config, context.scene, context.decoupling
     optimiser = torch.optim.Adam(_parameter_groups(context))
     guard = StepGuard(optimiser, "stage 2", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
@@ -67,6 +69,21 @@ def run_stage2(context: StageContext) -> Stage2Result:
                              f"(tolerance {iterations.stage2_tolerance} per {iterations.convergence_window} steps)")
             break
     return Stage2Result(history, term_history, decoupling.kept)
+
+
+def _weighted_by_evidence(context: StageContext) -> StageContext:
+    """The context whose face region h is weighted by how much each pixel tells about the shading
+    (deface/priors/shading_evidence.py); the same context when that is off. Stage 3 keeps h itself."""
+    evidence = context.config.shading_evidence
+    if evidence.strength <= 0:
+        return context
+    inputs = context.inputs
+    sizes = inputs.landmarks.face_size if inputs.landmarks.face_size is not None else \
+        torch.full((inputs.num_frames,), float(max(context.target.size)) / 2)
+    weighted = tuple(h * torch.as_tensor(texture_weight(context.target.images[frame].numpy(), h.numpy(),
+                                                        float(sizes[frame]), evidence))
+                     for frame, h in enumerate(inputs.face_classifier))
+    return replace(context, inputs=replace(inputs, face_classifier=weighted))
 
 
 def _coarse_level(context: StageContext) -> tuple[int, StageContext | None]:
@@ -109,7 +126,7 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool,
     for frame in range(frames):
         geometry = context.geometry(frame)  # once per step: shared by the render and L_lan
         rendered = context.render_frame(frame, textures, refresh_shadows, geometry=geometry)
-        total = total + terms.add("photometric", weights.photometric * context.photometric(frame, rendered),
+        total = total + terms.add("photometric", weights.photometric * _photometric(context, frame, rendered),
                                   per_frame)
         total = total + terms.add("landmarks", weights.landmarks * context.inputs.landmarks.loss(geometry, frame),
                                   per_frame)
@@ -122,6 +139,19 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool,
     total = total + terms.add("identity_prior", weights.identity_prior * scene.identity.pow(2).mean())
     total = total + terms.add("expression_prior", weights.expression_prior * scene.expression.pow(2).mean())
     return total + terms.add("scene_light_colour", context.scene_light_prior())
+
+
+def _photometric(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:
+    """Stage 2's L_pho. With ``decouple.stage2_robust_scale`` the lights, the geometry and the albedo coefficients
+    are fitted to its saturated form (what the albedo model cannot explain pulls them little) while the light
+    masks f keep the paper's L1: a cast shadow is a large miss the masks must follow."""
+    robust = context.config.decouple.stage2_robust_scale
+    if robust <= 0:
+        return context.photometric(frame, rendered)
+    images, masks = rendered.light_images, rendered.light_masks
+    for_lights = replace(rendered, face=compose_face(images, masks.detach()))
+    for_masks = replace(rendered, face=compose_face(images.detach(), masks))
+    return context.photometric(frame, for_lights, robust) + context.photometric(frame, for_masks)
 
 
 def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool,

@@ -45,12 +45,16 @@ class LandmarkTarget:
     detected: torch.Tensor  # [T, N, 2] detected points in the frame's pixels
     weights: torch.Tensor  # [N] per-point weights of the correspondence
     pixel_scale: float = 1.0  # the frame's pixels per working pixel (0.5 at stage 2's half-size level)
+    face_size: torch.Tensor | None = None  # [T] the detected face's size in working pixels (its landmarks' box
+    # diagonal)
+    units: str = "pixels"  # distances in working pixels, or in units of face_size ("face")
 
     def loss(self, geometry: FrameGeometry, frame: int) -> torch.Tensor:
-        """L_lan as in the authors' code: weighted mean squared distance, in working pixels, of the projected
-        points of ``geometry`` (the frame's posed mesh and camera)."""
+        """L_lan as in the authors' code: weighted mean squared distance of the projected points of ``geometry``
+        (the frame's posed mesh and camera), in working pixels or in units of the face's size."""
         points, _ = geometry.camera.project(model_landmarks(geometry.mesh.vertices, self.correspondence))
-        return landmark_loss(points, self.detected[frame], self.pixel_scale, self.weights, squared=True)
+        scale = self.pixel_scale * self.face_size[frame] if self.units == "face" else self.pixel_scale
+        return landmark_loss(points, self.detected[frame], scale, self.weights, squared=True)
 
 
 @dataclass(frozen=True)
@@ -214,11 +218,12 @@ class StageContext:
         cache = self.shadow_caches[frame]
         return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
 
-    def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
+    def photometric(self, frame: int, rendered: FrameRender, robust_scale: float = 0.0) -> torch.Tensor:
         return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
                                 rendered.coverage, blur=self.config.render.render_blur,
                                 form=self.config.decouple.loss_form,
-                                clipped=self.target.clipped[frame] if self.config.decouple.clipped_as_bound else None)
+                                clipped=self.target.clipped[frame] if self.config.decouple.clipped_as_bound else None,
+                                robust_scale=robust_scale)
 
 
 class LossTerms:

@@ -48,7 +48,8 @@ class FitTarget:
         render = config.render
         return RenderConfig(bands=config.lights.bands, shadows=render.shadows, shadow_rays=render.shadow_rays,
                             specular=render.specular, shadow_tolerance_cm=render.shadow_tolerance_cm,
-                            seed=config.seed, shadow_ray_offset=render.shadow_ray_offset)
+                            seed=config.seed, shadow_ray_offset=render.shadow_ray_offset,
+                            non_negative_lights=render.non_negative_lights)
 
 
 def working_frames(frames: list[np.ndarray], resolution: int) -> tuple[list[np.ndarray], float]:

@@ -35,6 +35,7 @@ from typing import Protocol
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from deface.io.images import LUMINANCE
 
@@ -48,6 +49,9 @@ MEDIAPIPE_FEATURES = {
     "right_brow": (46, 52, 53, 55, 63, 65, 66, 70, 105, 107),
     "nostrils": (1, 2, 4, 5, 19, 45, 48, 64, 94, 97, 98, 115, 220, 275, 278, 294, 326, 327, 344, 440),
 }  # fmt: skip
+MEDIAPIPE_FACE_OVAL = (10, 21, 54, 58, 67, 93, 103, 109, 127, 132, 136, 148, 149, 150, 152, 162, 172, 176, 234, 251,
+                       284, 288, 297, 323, 332, 338, 356, 361, 365, 377, 378, 379, 389, 397, 400, 454)
+MEDIAPIPE_NOSE_BASE = (2, 98, 327)  # subnasale and the alae's bases: the beard zone's top
 IBUG68_FEATURES = {
     "left_brow": tuple(range(17, 22)),
     "right_brow": tuple(range(22, 27)),
@@ -86,6 +90,18 @@ class SkinClassifierConfig:
     """Robust trimming of the core's chroma, in MAD-based standard deviations."""
     smoothing: float = 0.015
     """Median filter size / blur sigma for the final map."""
+    beard_zone: bool = False
+    """The face below the nose's base within the face's outline (where beards and moustaches grow) is face
+    whatever its colour, as face parsers label a beard skin: its albedo is the person's (deface/priors/
+    shading_evidence.py keeps its texture from pulling stage 2's lights). MediaPipe landmarks only."""
+    hull_margin: float = 0.0
+    """The landmarks' convex hull, which bounds h, grows by this share of the face box's diagonal (0: 2 pixels). The
+    hull of MediaPipe's points stops short of the hairline and the jaw's sides; the skin model, not the hull, is
+    then what sets the face's edge there."""
+    enclosed_area: float = 0.06
+    """Non-skin patches enclosed by skin, each up to this share of the face region, are face: moles, freckles,
+    a birthmark, a moustache or goatee, make-up. They lie on the face's surface (face parsers label them skin),
+    while what occludes the face (hair, a hand, a hat, glasses' arms) reaches in from its border."""
 
 
 def _as_numpy(array, dtype=np.float32) -> np.ndarray:
@@ -105,6 +121,17 @@ def _hull_mask(points: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 def _disk(radius: int) -> np.ndarray:
     radius = max(1, int(radius))
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def beard_zone_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """[H, W] bool: the convex hull of the face outline's points below the nose's base and the base itself
+    (MediaPipe 468/478 layout; empty for others)."""
+    if landmarks.shape[0] not in (468, 478):
+        return np.zeros(shape, bool)
+    base = landmarks[list(MEDIAPIPE_NOSE_BASE)]
+    oval = landmarks[list(MEDIAPIPE_FACE_OVAL)]
+    lower = oval[oval[:, 1] > base[:, 1].max()]
+    return _hull_mask(np.concatenate([base, lower]), shape)
 
 
 def feature_mask_from_landmarks(landmarks: np.ndarray, shape: tuple[int, int], dilation: int) -> np.ndarray:
@@ -179,6 +206,18 @@ def _closest_over_clipped(linear: np.ndarray, pattern: np.ndarray, mean: np.ndar
     return best
 
 
+def enclosed_patches(skin: np.ndarray, region: np.ndarray, largest: float) -> np.ndarray:
+    """[H, W] bool: the non-skin patches inside ``region`` that skin encloses (touching neither the region's border
+    nor its outside), each at most ``largest`` times the region's area."""
+    holes = ndimage.binary_fill_holes(skin) & ~skin & region
+    labels, count = ndimage.label(holes)
+    if count == 0:
+        return holes
+    areas = ndimage.sum_labels(holes, labels, index=np.arange(1, count + 1))
+    small = np.concatenate([[False], areas <= largest * region.sum()])
+    return small[labels]
+
+
 class SkinColourClassifier:
     """Offline h: skin-chroma Gaussian fitted on the face itself, landmark features kept (see module doc)."""
 
@@ -197,8 +236,9 @@ class SkinColourClassifier:
             raise ValueError(f"coverage {region.shape} must match the image {shape}")
         points = None if landmarks is None else _as_numpy(landmarks, np.float64)[:, :2]
         if points is not None and points.shape[0] >= 3:
-            hull = cv2.dilate(_hull_mask(points, shape).astype(np.uint8), _disk(2)).astype(bool)
-            region &= hull
+            hull = _hull_mask(points, shape)
+            margin = cfg.hull_margin * float(np.hypot(*np.ptp(points, axis=0))) if cfg.hull_margin > 0 else 2
+            region &= cv2.dilate(hull.astype(np.uint8), _disk(round(margin))).astype(bool)
         if region.sum() < 20:
             raise ValueError("the face region (coverage, landmarks) holds fewer than 20 pixels")
         ys, xs = np.nonzero(region)
@@ -210,6 +250,7 @@ class SkinColourClassifier:
         if features is not None:
             feature |= _as_numpy(features) > 0.5
         feature &= region
+        beard = beard_zone_mask(points, shape) & region if cfg.beard_zone and points is not None else None
 
         linear = srgb**2.2
         luma = linear @ LUMINANCE.astype(np.float32)
@@ -236,6 +277,9 @@ class SkinColourClassifier:
         skin = np.where(reliable, skin, neighbourhood)
         skin = cv2.medianBlur((skin * 255).astype(np.uint8), size) / 255.0
         skin = np.maximum(skin, feature.astype(np.float32))
+        skin = np.maximum(skin, enclosed_patches(skin > 0.5, region, cfg.enclosed_area).astype(np.float32))
+        if beard is not None:
+            skin = np.maximum(skin, beard.astype(np.float32))
         binary = (skin > 0.5).astype(np.uint8)
         kernel = _disk(size // 2)
         cleaned = cv2.morphologyEx(cv2.morphologyEx(binary, cv2.MORPH_CLOSE, kernel), cv2.MORPH_OPEN, kernel)
@@ -246,7 +290,7 @@ class SkinColourClassifier:
 
 
 def load_face_region_classifier(
-    models_dir: str | os.PathLike | None = None, prefer: str = "bisenet"
+    models_dir: str | os.PathLike | None = None, prefer: str = "bisenet", skin: SkinClassifierConfig | None = None
 ) -> tuple[FaceRegionClassifier, str]:
     """(classifier, description): BiSeNet when asked for and its checkpoint is found, else the skin model."""
     if prefer not in ("bisenet", "skin"):
@@ -257,5 +301,5 @@ def load_face_region_classifier(
         try:
             return BiSeNetFaceParser.from_models_dir(models_dir), "BiSeNet face parsing (79999_iter.pth)"
         except MissingWeightsError as error:
-            return SkinColourClassifier(), f"skin-colour classifier (BiSeNet off: {error})"
-    return SkinColourClassifier(), "skin-colour classifier"
+            return SkinColourClassifier(skin), f"skin-colour classifier (BiSeNet off: {error})"
+    return SkinColourClassifier(skin), "skin-colour classifier"

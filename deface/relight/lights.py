@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from deface.render.sh import cosine_lobe_coefficients, sh_basis, white_light
+from deface.render.sh import cosine_lobe_coefficients, fibonacci_sphere, sh_basis, white_light
 
 LEVEL = 0.9
 """Peak diffuse response of a white surface under a preset or an environment map (after scaling)."""
@@ -40,15 +40,6 @@ ENV_MAX_WIDTH = 512  # environment maps are box-downsampled to at most this widt
 
 class LightSourceError(ValueError):
     """A light source that cannot be used (unknown name, unreadable file, wrong shape); one line."""
-
-
-def fibonacci_sphere(count: int) -> np.ndarray:
-    """[count, 3] float64 near-uniform unit directions (equal area each: 4 pi / count)."""
-    i = np.arange(count) + 0.5
-    z = 1.0 - 2.0 * i / count
-    radius = np.sqrt(1.0 - z * z)
-    phi = i * math.pi * (3.0 - math.sqrt(5.0))
-    return np.stack([radius * np.cos(phi), radius * np.sin(phi), z], -1)
 
 
 def project_to_sh(directions: np.ndarray, radiance: np.ndarray, solid_angles: np.ndarray, bands: int) -> torch.Tensor:

@@ -28,7 +28,7 @@ from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures, sample_textures
 from deface.render.raycast import RayScene
-from deface.render.sh import cosine_lobe_coefficients, sh_band_sums
+from deface.render.sh import cosine_lobe_coefficients, non_negative, sh_band_sums
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 
@@ -50,6 +50,9 @@ class RenderConfig:
     """Seed of the per-vertex random rotations of the shadow-ray pattern (renders are deterministic)."""
     shadow_ray_offset: float = 1e-3
     """Shadow-ray origins move along the normal by this fraction of the mesh's bounding-box diagonal."""
+    non_negative_lights: bool = True
+    """Render each SH light with its negative radiance clamped (:func:`deface.render.sh.non_negative`), as
+    NextFace renders its lights through a clamped environment map; off renders the SH as given."""
 
 
 @dataclass(frozen=True)
@@ -204,6 +207,8 @@ class Renderer:
     ) -> RenderOutput:
         """Shade covered pixels under every light ``sh_lights`` [K, B², 3]; ``transfer`` None = no shadows."""
         camera = camera.resolved()
+        if self.config.non_negative_lights:
+            sh_lights = non_negative(sh_lights)
         bands = _bands_of(sh_lights)
         num_lights = sh_lights.shape[0]
         height, width = camera.height, camera.width

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from functools import lru_cache
 
+import numpy as np
 import torch
 
 from deface.render import kernels
@@ -107,6 +108,39 @@ def phong_lobe_filter(roughness: torch.Tensor, bands: int) -> torch.Tensor:
     exponent = (2.0 / (alpha * alpha) - 2.0).clamp_min(1e-4)  # [...]
     l_sq = torch.arange(bands, dtype=roughness.dtype, device=roughness.device) ** 2
     return torch.exp(-l_sq / (2.0 * exponent[..., None]))
+
+
+def fibonacci_sphere(count: int) -> np.ndarray:
+    """[count, 3] float64 near-uniform unit directions (equal area each: 4 pi / count)."""
+    i = np.arange(count) + 0.5
+    z = 1.0 - 2.0 * i / count
+    radius = np.sqrt(1.0 - z * z)
+    phi = i * math.pi * (3.0 - math.sqrt(5.0))
+    return np.stack([radius * np.cos(phi), radius * np.sin(phi), z], -1)
+
+
+RADIANCE_SAMPLES = 2048
+"""Directions at which :func:`non_negative` reads a light's radiance (about 4.5 degrees apart)."""
+
+
+@lru_cache(maxsize=16)
+def _radiance_basis(bands: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The SH basis at RADIANCE_SAMPLES directions [N, B²] and its pseudo-inverse [B², N] (least squares)."""
+    basis = sh_basis(torch.as_tensor(fibonacci_sphere(RADIANCE_SAMPLES)), bands)
+    return basis, torch.linalg.pinv(basis)
+
+
+def non_negative(lights: torch.Tensor) -> torch.Tensor:
+    """Lights [K, B², 3] whose radiance is clamped at 0: the band-limited SH closest over the sphere (least
+    squares) to max(L(w), 0), as NextFace clamps the environment map it renders its SH lights through. A light
+    whose radiance is nowhere negative is returned as it is. Without it a fitted light's negative lobes
+    subtract light (a specular reflection towards them darkens a downward-facing chin like a beard)."""
+    bands = int(round(math.sqrt(lights.shape[1])))
+    basis, inverse = (matrix.to(lights) for matrix in _radiance_basis(bands))
+    radiance = torch.einsum("nj,kjc->knc", basis, lights)
+    if bool((radiance >= 0).all()):
+        return lights
+    return torch.einsum("jn,knc->kjc", inverse, radiance.clamp_min(0))
 
 
 def white_light(bands: int, ambient: float = 0.7) -> torch.Tensor:
