@@ -33,7 +33,7 @@ def test_ablation_rows_have_the_configuration_their_label_says():
     assert switches == {"w/o f, w/o g": (False, False), "+ f (Ours)": (True, False), "+ g only": (False, True),
                         "+ f + g": (True, True)}
     priors = {label: (c.priors.global_prior, c.priors.local_prior) for label, c in _row_configs("Priors").items()}
-    assert priors == {"NA": (False, False), "GP": (True, False), "GP + LP (Ours)": (True, True)}
+    assert priors == {"NA (Ours)": (False, False), "GP": (True, False), "GP + LP": (True, True)}
     for label, config in _row_configs("One global SH").items():
         assert f"B = {config.lights.bands}" == label and config.lights.num_lights == 1
 

@@ -56,7 +56,7 @@ def test_stage_results_carry_named_terms_that_sum_to_the_total(state):
             assert sum(terms.values()) == pytest.approx(total, rel=1e-4, abs=1e-6)
     assert {"landmarks", "area", "binary"} <= set().union(*state.stage2.terms)
     names = set().union(*state.stage3.terms)
-    assert "local_prior" in names  # the fused CPU kernels name regularisers + GP as one term
+    assert "local_prior" not in names  # the default has no LP (deface/fit/presets.py): no term for it
     assert names & {"texture_regularisers", "texture_regularisers_and_global_prior"}
 
 
