@@ -254,7 +254,8 @@ class Stage1Config:
     expression_weight: float = 1e-3
     """w_ex of mean(beta) (blendshapes) or mean(beta²) (PCA expressions)."""
     initial_fov_degrees: float = 20.0
-    """Field of view over the longest image side that sets the initial focal length."""
+    """Field of view over the longest side of the whole photo (not of the crop around the face the fit works on)
+    that sets the initial focal length."""
     optimise_focal: bool = True
     """Fit the focal length (shared by all frames); off: keep the initial one."""
     normalise_by: Literal["face", "image"] = "face"
@@ -296,6 +297,20 @@ class RenderSettings:
 
 
 @dataclass(frozen=True)
+class CropConfig:
+    """The crop around the face that the fit works on (deface/fit/framing.py); everything written refers back
+    to the whole photo."""
+
+    enabled: bool = True
+    """Crop each frame to a square around the face's landmarks (a clip: one crop around every frame's face);
+    off: the whole frame, as before issue 39."""
+    margin: float = 2.0
+    """Side of the crop over the larger side of the landmarks' box (chin to forehead top, temple to temple):
+    2 keeps the hair above the forehead, the neck below the chin and about half a face of background beside
+    each cheek (the framing of CelebAMask-HQ and FFHQ's faces). The crop is cut to the frame."""
+
+
+@dataclass(frozen=True)
 class FitConfig:
     """Everything one fit uses. Build from a preset: ``presets.get("default")``."""
 
@@ -303,10 +318,26 @@ class FitConfig:
     """Name of the preset this config came from (recorded in params.json)."""
     model: str = "ict"
     """Face model: "ict" (embedded default) or "bfm" (BFM 2017 + AlbedoMM, user-supplied)."""
-    resolution: int = 256
-    """Longest side of the working image in pixels (the paper evaluates at 256)."""
-    texture_size: int = 512
-    """UV texture resolution of the outputs (and of stage 3's maps)."""
+    resolution: int = 512
+    """Cap on the longest side of the working image, the crop around the face (``crop``), in pixels: the fit
+    works at the photo's own scale up to this, never upsampled. 512 puts a face of up to about 256 pixels
+    across in the working image (the paper's 256² crops hold faces of about 150); stage 2 runs at
+    ``stage2_resolution`` or less, stage 3 at this size."""
+    crop: CropConfig = field(default_factory=CropConfig)
+    """The crop around the face."""
+    stage2_resolution: int = 256
+    """Stage 2 fits at the working size halved until its longer side is at most this (deface/fit/coarse.py;
+    pose, shape, albedo coefficients, lights and f, g are not tied to the pixel grid); stage 3 refines the maps
+    at the full working size. 0 = stage 2 at the working size. Its ``iterations.stage2_coarse_share`` halves
+    once more."""
+    texture_size: int | None = None
+    """Side of the UV maps of the outputs and of stage 3; None: what the face's pixels support, about one
+    working pixel per texel where the face is seen (deface/fit/framing.py), a power of two within
+    ``texture_size_range``."""
+    texture_size_range: tuple[int, int] = (512, 1024)
+    """Smallest and largest side of the UV maps when ``texture_size`` is None. 512 (the earlier fixed default)
+    is the smallest: a smaller face's maps hold no more detail at 512 (stage 3's pyramid gates the levels finer
+    than its pixels) but viewers and the benchmarks keep their size."""
     stage2_texture_size: int = 128
     """UV resolution of the albedo model's maps T^0 in stage 2 (the albedo model's native resolution: stage
     2's textures are smooth by design)."""
