@@ -69,11 +69,11 @@ def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool
     return [found[i] for i in keep], keep
 
 
-def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source: str = "input",
-        video: bool = False, log: FitLog | None = None) -> FitOutput:
-    """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``."""
-    log = log or FitLog(name=source)
-    log.start("landmarks")
+def detect_target(frames: list[np.ndarray], config: FitConfig, source: str, video: bool,
+                  log: FitLog | None = None) -> FitTarget:
+    """The target of input ``frames``: landmarks on the whole frames, then the crop around the face
+    (:func:`deface.fit.target.frame_target`), said in ``log``."""
+    log = log or FitLog(quiet=True)
     landmarks, kept = detect(frames, config, source, video)
     if landmarks[0].num_faces > 1:
         log.info(f"{landmarks[0].num_faces} faces found; fitting face {config.face_index} (0 = largest)")
@@ -81,6 +81,15 @@ def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source:
         log.info(f"frames without a face were left out: {sorted(set(range(len(frames))) - set(kept))}")
     target = frame_target([frames[i] for i in kept], landmarks, config, kept_frames=kept)
     _log_framing(target, log)
+    return target
+
+
+def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source: str = "input",
+        video: bool = False, log: FitLog | None = None) -> FitOutput:
+    """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``."""
+    log = log or FitLog(name=source)
+    log.start("landmarks")
+    target = detect_target(frames, config, source, video, log)
     log.stop("landmarks")
     return fit_target(target, config, models_dir=models_dir, log=log)
 
