@@ -26,6 +26,7 @@ def register(app: typer.Typer) -> None:
     bench.command("run")(run_command)
     bench.command("skin-tone")(skin_tone_command)
     bench.command("sheet")(sheet_command)
+    bench.command("albedo")(albedo_command)
     app.add_typer(bench, name="bench")
 
 
@@ -189,4 +190,70 @@ def skin_tone_command(
         texture = "" if variant == PROXY else f"; speckle {speckles}; detail {details}"
         console.print(f"{variant}: MAE {s['mae']:.1f}, groups {groups}, bias {s['bias']:.2f}, "
                       f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}{texture}")
+    console.print(f"wrote {output / 'report.md'} and {sheet}")
+
+
+def albedo_command(
+    folder: Annotated[Path, typer.Argument(help="Truth set: images/, albedo/, MANIFEST.tsv[, masks/, mesh.obj].")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Results folder (fits cached per render).")],
+    presets_: Annotated[str, typer.Option("--preset", help="Comma list of presets measured.")] = "default",
+    settings: Annotated[list[str] | None, typer.Option("--set", help="PATH=VALUE config change for every "
+                                                       "preset (as deface fit --set); names the variant.")] = None,
+    schedule: Annotated[str, typer.Option(help="'full' (presets as defined) or 'quick'.")] = "full",
+    jobs: Annotated[int, typer.Option(help="Fits in parallel (one per core).")] = 2,
+    models: Annotated[Path | None, typer.Option("--models", help="Model files folder.")] = None,
+    report: Annotated[Path | None, typer.Option(help="Also rewrite this set's section of this file.")] = None,
+) -> None:
+    """Fit renders of known albedo and score each diffuse map against the truth in UV: PSNR, SSIM, colour noise,
+    and per region (the set's masks) the darkness kept and the fine structure; report.md, results.json and
+    contact_sheet.png in OUTPUT."""
+    import json
+
+    from rich.console import Console
+
+    from deface.eval.albedo_benchmark import (
+        contact_sheet,
+        read_truth_set,
+        report_markdown,
+        run_albedo_benchmark,
+        summary,
+    )
+    from deface.eval.benchmark import SCHEDULES, update_benchmarks_md
+    from deface.fit import presets
+    from deface.fit.config import override, set_from_text
+
+    console = Console(soft_wrap=True)
+    if schedule not in SCHEDULES:
+        raise typer.BadParameter(f"unknown schedule {schedule!r}; choose {', '.join(SCHEDULES)}")
+
+    def configured(name: str):
+        config = override(presets.get(name), **SCHEDULES[schedule])
+        for assignment in settings or []:
+            config = set_from_text(config, assignment)
+        return config
+
+    suffix = "+" + ",".join(settings) if settings else ""
+    try:
+        renders = read_truth_set(folder)
+        variants = {f"{name}{suffix}": configured(name)
+                    for name in (p.strip() for p in presets_.split(",") if p.strip())}
+    except ValueError as error:
+        console.print(f"[red]error:[/red] {error}")
+        raise typer.Exit(2) from None
+    records = run_albedo_benchmark(folder, output, variants, jobs, models, log=console.print)
+    command = f"deface bench albedo {folder} -o {output} --preset {presets_} --schedule {schedule}"
+    command += "".join(f" --set {s}" for s in settings or [])
+    section = report_markdown(renders, records, folder.resolve().name, command)
+    (output / "report.md").write_text(section)
+    (output / "results.json").write_text(json.dumps(
+        {v: {"summary": summary(r), "renders": r} for v, r in records.items()}, indent=1))
+    sheet = contact_sheet(folder, output, renders, list(records))
+    if report is not None:
+        update_benchmarks_md(report, section, key=f"albedo-{folder.resolve().name}")
+    for variant, recs in records.items():
+        s = summary(recs)
+        regions = ", ".join(f"{r} kept {v['darkness_kept']:.2f} fine {v['fine_structure']:.2f}"
+                            for r, v in s.items() if r != "face")
+        console.print(f"{variant}: PSNR {s['face']['psnr']:.2f} dB, SSIM {s['face']['ssim']:.3f}, colour noise "
+                      f"{s['face']['colour_noise']:.2f} ({s['face']['colour_noise_truth']:.2f}); {regions}")
     console.print(f"wrote {output / 'report.md'} and {sheet}")

@@ -1,0 +1,263 @@
+"""The albedo benchmark: fits of renders whose albedo is known, scored against it in UV space.
+
+A truth set is a folder with ``images/`` (the renders), ``albedo/`` (the true diffuse albedo maps, sRGB, in the
+face model's UV layout), ``MANIFEST.tsv`` and optionally ``masks/`` (regions to score, white = in; ``forehead`` is
+plain skin, the reference of the map's level) and ``mesh.obj`` (the rendered geometry, the model's topology).
+Manifest columns: ``file``; the albedo is ``albedo`` if given, else ``tone`` + ``.png``, else the part of the file
+name before its first ``_``; the light is named by ``light``, else by ``kelvin`` and ``shadow``.
+``../shared/data/detail-synth`` and ``../shared/data/skin-tone-synth`` are two such sets.
+
+Each render is fitted (cached per render with its configuration) and scored (:mod:`deface.eval.albedo_measures`)
+over the texels the render shows: the true mesh (aligned to the fitted one) seen from the fitted camera, facing it
+within ``MAX_ANGLE`` (without ``mesh.obj``: the texels the fit saw). A region of a mask is scored on its shown
+texels; without masks the whole shown face is the region and its own reference.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from deface.eval import albedo_measures as measures
+from deface.eval.benchmark import cached_scores, config_json, map_in_processes
+from deface.fit.config import FitConfig
+
+MAX_ANGLE = 70.0
+"""Texels facing the camera further than this (degrees) are not scored: the photo hardly shows them."""
+REFERENCE = "forehead"
+"""The mask of plain skin whose level the fitted map is matched to."""
+FACE = "face"
+"""The region name of the whole shown face (PSNR, SSIM, colour noise)."""
+
+
+@dataclass(frozen=True)
+class TruthRender:
+    file: str  # the render in images/
+    albedo: str  # its true albedo in albedo/
+    light: str  # what lit it (a table column)
+
+    @property
+    def stem(self) -> str:
+        return Path(self.file).stem
+
+
+def read_truth_set(folder: Path) -> list[TruthRender]:
+    """The renders of a truth set; one-line errors for a missing manifest, image or albedo."""
+    manifest = folder / "MANIFEST.tsv"
+    if not manifest.is_file():
+        raise ValueError(f"{folder}: no MANIFEST.tsv (a column 'file'; see deface/eval/albedo_benchmark.py)")
+    with manifest.open(newline="") as handle:
+        rows = list(csv.DictReader(handle, delimiter="\t"))
+    if not rows or "file" not in rows[0]:
+        raise ValueError(f"{manifest}: no rows, or no column 'file'")
+    renders = [TruthRender(row["file"], _albedo_name(row), _light_name(row)) for row in rows]
+    for render in renders:
+        for path in (folder / "images" / render.file, folder / "albedo" / render.albedo):
+            if not path.is_file():
+                raise ValueError(f"{path}: not found (listed in {manifest})")
+    return renders
+
+
+def _albedo_name(row: dict) -> str:
+    if row.get("albedo"):
+        return row["albedo"]
+    if row.get("tone"):
+        return f"{row['tone']}.png"
+    return f"{Path(row['file']).stem.split('_')[0]}.png"
+
+
+def _light_name(row: dict) -> str:
+    if row.get("light"):
+        return row["light"]
+    shadow = " shadow" if row.get("shadow", "0") not in ("", "0") else ""
+    return f"{row['kelvin']} K{shadow}" if row.get("kelvin") else Path(row["file"]).stem
+
+
+def region_masks(folder: Path) -> dict[str, np.ndarray]:
+    """The set's masks at the score size, name -> [S, S] bool (empty without ``masks/``)."""
+    from deface.io.images import load_image
+
+    return {path.stem: measures.at_score_size(load_image(path)[..., 0] > 0.5)
+            for path in sorted((folder / "masks").glob("*.png"))}
+
+
+def score_fit(fitted: np.ndarray, truth: np.ndarray, shown: np.ndarray, masks: dict[str, np.ndarray]) -> dict:
+    """Every measure of a fitted map against the truth (both linear [S, S, 3] at the score size) over the shown
+    texels ``shown`` [S, S]: {region: {...}} with the whole face under :data:`FACE`."""
+    reference = masks[REFERENCE] & shown if REFERENCE in masks else shown
+    matched = measures.gain_matched(fitted, truth, reference)
+    psnr, ssim = measures.psnr_ssim(matched, truth, shown)
+    scores = {FACE: {"psnr": psnr, "ssim": ssim, "colour_noise": measures.colour_noise(matched, shown),
+                     "colour_noise_truth": measures.colour_noise(truth, shown), "texels": int(shown.sum())}}
+    for name, mask in masks.items():
+        region = mask & shown
+        if name == REFERENCE or region.sum() < 4:
+            continue
+        scores[name] = {"darkness_kept": measures.darkness_kept(matched, truth, region, reference),
+                        "fine_structure": measures.fine_structure(matched, truth, region),
+                        "texels": int(region.sum())}
+    return scores
+
+
+def shown_texels(result, truth_mesh: np.ndarray | None, size: int = measures.SCORE_SIZE) -> np.ndarray:
+    """[S, S] bool: texels of the true surface (or, without it, of the fitted one) that the fit's first frame shows
+    within :data:`MAX_ANGLE`."""
+    import torch
+
+    from deface.models.uvmap import rasterize_uv
+    from deface.render.mesh import Mesh
+    from deface.texture.confidence import texel_view
+
+    frame = result.frames[0]
+    fitted = frame.geometry.mesh
+    vertices = fitted.vertices
+    if truth_mesh is not None:
+        vertices = torch.as_tensor(similarity_aligned(truth_mesh, fitted.vertices.detach().numpy()),
+                                   dtype=torch.float32)
+    mesh = Mesh(vertices, fitted.triangles, fitted.uvs, fitted.triangle_uvs)
+    raster = rasterize_uv(result.model.uvs, result.model.triangle_uvs, size)
+    view = texel_view(raster, mesh, frame.geometry.camera)
+    return view.visible & (view.facing >= np.cos(np.radians(MAX_ANGLE)))
+
+
+def similarity_aligned(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``source`` [V, 3] moved by the similarity (rotation, scale, translation) that best fits ``target`` [V, 3]
+    in least squares (Umeyama 1991)."""
+    source_mean, target_mean = source.mean(0), target.mean(0)
+    a, b = source - source_mean, target - target_mean
+    u, s, vt = np.linalg.svd(a.T @ b)
+    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    rotation = u @ flip @ vt
+    scale = (s * np.diag(flip)).sum() / (a ** 2).sum()
+    return scale * a @ rotation + target_mean
+
+
+def _fit_render(task: tuple) -> dict:
+    """Worker: fit one render, write its outputs and scores.json (cached by configuration)."""
+    folder, render, variant, config, out_dir, models_dir = task
+    result_dir = Path(out_dir) / variant / render.stem
+    cached = cached_scores(result_dir / "scores.json", config)
+    if cached is not None:
+        return cached
+    record = measure_render(Path(folder), render, config, result_dir, models_dir)
+    record["config"] = config_json(config)
+    (result_dir / "scores.json").write_text(json.dumps(record, indent=1))
+    return record
+
+
+def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_dir: Path, models_dir=None) -> dict:
+    """Fit a render, write the fit (and its albedo under a neutral light) to ``result_dir``, score its map."""
+    from deface.export.files import save_png
+    from deface.export.outputs import write_fit
+    from deface.fit.log import FitLog
+    from deface.fit.pipeline import fit
+    from deface.io.images import load_image, srgb_to_linear
+    from deface.models.ict_build import read_obj
+    from deface.render.sh import white_light
+
+    started = time.perf_counter()
+    path = folder / "images" / render.file
+    result = fit([load_image(path)], config, models_dir=models_dir, source=str(path), log=FitLog(quiet=True))
+    seconds = time.perf_counter() - started
+    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]})
+    neutral = result.render(lights=white_light(config.lights.bands))[0].face
+    save_png(result_dir / "neutral.png", neutral.clamp(0, 1).numpy())
+    mesh_path = folder / "mesh.obj"
+    truth_mesh = read_obj(mesh_path, with_faces=False)["positions"] if mesh_path.is_file() else None
+    shown = shown_texels(result, truth_mesh)
+    truth = measures.at_score_size(srgb_to_linear(load_image(folder / "albedo" / render.albedo)).astype(np.float64))
+    fitted = measures.at_score_size(result.textures.diffuse.detach().clamp(0, 1).numpy().astype(np.float64))
+    masks = region_masks(folder)
+    reference = masks[REFERENCE] & shown if REFERENCE in masks else shown
+    matched = measures.gain_matched(fitted, truth, reference)
+    save_png(result_dir / "albedo_difference.png", measures.difference_image(matched, truth, shown), srgb=False)
+    return {"scores": score_fit(fitted, truth, shown, masks), "seconds": seconds,
+            "light": render.light, "kept_lights": len(result.kept_lights)}
+
+
+def run_albedo_benchmark(folder: Path, out_dir: Path, variants: dict[str, FitConfig], jobs: int = 2,
+                         models_dir=None, log=print) -> dict:
+    """Fit every render with every variant {name: config}; returns {variant: {stem: record}}."""
+    renders = read_truth_set(folder)
+    tasks = [(str(folder), r, name, config, str(out_dir), models_dir) for name, config in variants.items()
+             for r in renders]
+    records: dict = {name: {} for name in variants}
+    for task, record in zip(tasks, map_in_processes(_fit_render, tasks, jobs), strict=True):
+        render, name = task[1], task[2]
+        records[name][render.stem] = record
+        face = record["scores"][FACE]
+        log(f"{name} / {render.stem}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}"
+            + "".join(f", {region} kept {s['darkness_kept']:.2f} fine {s['fine_structure']:.2f}"
+                      for region, s in record["scores"].items() if region != FACE)
+            + f" ({record['seconds']:.0f} s)")
+    return records
+
+
+def summary(records: dict) -> dict:
+    """Means over renders of one variant's records {stem: record}: {region: {measure: mean}}."""
+    table: dict = {}
+    for record in records.values():
+        for region, values in record["scores"].items():
+            for measure, value in values.items():
+                table.setdefault(region, {}).setdefault(measure, []).append(value)
+    return {region: {m: _mean(v) for m, v in values.items()} for region, values in table.items()}
+
+
+def _mean(values: list[float]) -> float:
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
+def report_markdown(renders: list[TruthRender], records: dict, title: str, command: str) -> str:
+    """A section for BENCHMARKS.md: one row per variant and render, the variant's mean last."""
+    regions = sorted({r for recs in records.values() for rec in recs.values() for r in rec["scores"]} - {FACE})
+    header = ["variant", "render", "light", "PSNR", "SSIM", "colour noise (truth)"]
+    header += [f"{r} {m}" for r in regions for m in ("kept", "fine")]
+    lines = [f"## Albedo against the truth: {title}", "", f"Regenerate: `{command}`", "",
+             "The fitted diffuse map against the true albedo in UV at 256², over the texels the render shows (the"
+             f" true surface within {MAX_ANGLE:.0f} degrees of facing the fitted camera), after one gain per channel"
+             f" matched on the {REFERENCE} (deface/eval/albedo_measures.py). PSNR/SSIM of the sRGB maps; colour noise:"
+             " RMS chroma of the map's fine structure x100 (the truth's in brackets); kept: darkness kept,"
+             " (1 - K_fit) / (1 - K_truth), K = the region's luminance over the reference's (1 = as dark as the"
+             " truth, 0 = bleached to skin); fine: correlation of the fine luminance (minus a Gaussian of 2 texels)"
+             " with the truth's.", "",
+             "| " + " | ".join(header) + " |", "|---" * len(header) + "|"]
+    for variant, recs in records.items():
+        rows = [(render.stem, render.light, recs[render.stem]["scores"]) for render in renders]
+        rows.append(("mean", "", summary(recs)))
+        for stem, light, scores in rows:
+            face = scores[FACE]
+            cells = [variant, stem, light, f"{face['psnr']:.2f}", f"{face['ssim']:.3f}",
+                     f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f})"]
+            for region in regions:
+                values = scores.get(region, {})
+                cells += [_cell(values.get("darkness_kept")), _cell(values.get("fine_structure"))]
+            lines.append("| " + " | ".join(cells) + " |")
+    lines.append(f"\n_Written {time.strftime('%Y-%m-%d %H:%M')}._")
+    return "\n".join(lines) + "\n"
+
+
+def _cell(value) -> str:
+    return "-" if value is None or not np.isfinite(value) else f"{value:.2f}"
+
+
+def contact_sheet(folder: Path, out_dir: Path, renders: list[TruthRender], variants: list[str], tile: int = 192):
+    """OUT/contact_sheet.png: per variant and render, render | true albedo | fitted albedo | the fit under a
+    neutral light | |fitted - truth| x4 (grey: not shown)."""
+    from deface.eval.sheets import image_grid
+
+    rows, captions = [], []
+    for variant in variants:
+        for render in renders:
+            fit = out_dir / variant / render.stem
+            rows.append([folder / "images" / render.file, folder / "albedo" / render.albedo,
+                         fit / "textures" / "diffuse.png", fit / "neutral.png", fit / "albedo_difference.png"])
+            captions.append(f"{variant} / {render.stem}: render | truth | fitted | neutral light | difference x4")
+    path = out_dir / "contact_sheet.png"
+    image_grid(rows, captions, tile).save(path)
+    return path
