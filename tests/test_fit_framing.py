@@ -281,3 +281,26 @@ def test_a_target_built_by_hand_is_the_whole_frame(canvas):
     assert target.framing.is_whole and target.principal_point is None
     assert target.framing.input_size == (CANVAS[0] * 2, CANVAS[1] * 2)
     assert target.scene_frames()[0] is canvas.image
+
+
+def test_a_clip_has_one_crop_around_every_frame_s_face(canvas):
+    """A clip's frames share one pixel grid (f's (x, y, t), the batched frames): one crop holding each face."""
+    moved = np.roll(canvas.image, (30, 50), axis=(0, 1))
+    shifted = Landmarks(canvas.landmarks.points + np.array([50, 30], np.float32), canvas.landmarks.depth,
+                        CANVAS, 1, 0)
+    target = frame_target([canvas.image, moved], [canvas.landmarks, shifted], _config())
+    framing = target.framing
+    for found in (canvas.landmarks, shifted):
+        left, top, right, bottom = framing.box
+        assert (found.points.min(0) >= np.array([left, top]) - 1e-3).all()
+        assert (found.points.max(0) <= np.array([right, bottom]) + 1e-3).all()
+    assert len(target.frames_srgb) == 2 and target.frames_srgb[0].shape == target.frames_srgb[1].shape
+    assert np.allclose(framing.to_input(target.landmarks[1].points), shifted.points, atol=1e-4)
+
+
+@pytest.mark.parametrize("setting", ["crop.margin=0.5", "texture_size_range=1024,512", "stage2_resolution=-1"])
+def test_a_bad_crop_or_size_setting_is_one_line(setting):
+    from deface.fit.config import set_from_text
+
+    with pytest.raises(ValueError, match=setting.split("=")[0].split(".")[-1]):
+        set_from_text(presets.get("default"), setting)

@@ -309,6 +309,10 @@ class CropConfig:
     2 keeps the hair above the forehead, the neck below the chin and about half a face of background beside
     each cheek (the framing of CelebAMask-HQ and FFHQ's faces). The crop is cut to the frame."""
 
+    def __post_init__(self) -> None:
+        if not self.margin >= 1.0:
+            raise ValueError(f"crop.margin must be at least 1 (the crop holds the whole face), got {self.margin}")
+
 
 @dataclass(frozen=True)
 class FitConfig:
@@ -375,6 +379,15 @@ class FitConfig:
     """Video: take every k-th frame before choosing `max_frames`."""
     face_index: int = 0
     """Which face when several are found (0 = largest)."""
+
+    def __post_init__(self) -> None:
+        low, high = self.texture_size_range
+        if not 16 <= low <= high <= 4096:
+            raise ValueError(f"texture_size_range must be two sizes with 16 <= smallest <= largest <= 4096, got "
+                             f"{self.texture_size_range}")
+        if self.resolution < 1 or self.stage2_resolution < 0:
+            raise ValueError(f"resolution must be positive and stage2_resolution at least 0, got {self.resolution} "
+                             f"and {self.stage2_resolution}")
 
 
 RENAMED = {
