@@ -304,3 +304,18 @@ def test_a_bad_crop_or_size_setting_is_one_line(setting):
 
     with pytest.raises(ValueError, match=setting.split("=")[0].split(".")[-1]):
         set_from_text(presets.get("default"), setting)
+
+
+def test_a_photo_decoded_smaller_than_its_file_also_gets_the_file_s_camera(cropped_fit, tmp_path):
+    from deface.export.outputs import _camera
+    from deface.io.images import image_size
+
+    camera = _camera(cropped_fit, [CANVAS[0] * 4, CANVAS[1] * 4])
+    assert camera["file"]["focal_px"] == pytest.approx(4 * camera["focal_px"])
+    assert camera["file"]["principal_point"] == [CANVAS[0] * 2, CANVAS[1] * 2]
+    assert "file" not in _camera(cropped_fit, list(CANVAS))
+    rotated = Image.new("RGB", (40, 30))
+    exif = rotated.getexif()
+    exif[0x0112] = 6  # stored landscape, shown portrait
+    rotated.save(tmp_path / "rotated.jpg", exif=exif)
+    assert image_size(tmp_path / "rotated.jpg") == (30, 40)

@@ -93,7 +93,7 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
         "pose": {"rotation_axis_angle": _np(result.rotation).tolist(),
                  "translation_cm": _np(result.translation).tolist(),
                  "convention": "model -> camera; camera x right, y down, z forward (OpenCV)"},
-        "camera": _camera(result),
+        "camera": _camera(result, record.get("file_size")),
         "crop": result.framing.record(),
         "lights": {"bands": config.lights.bands, "kept": kept, "initial_count": int(lights.shape[0]),
                    "sh": {str(k): lights[k].tolist() for k in kept},
@@ -125,17 +125,24 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
     np.savez_compressed(folder / "params.npz", **fit_arrays(result, renders))
 
 
-def _camera(result: FitOutput) -> dict:
-    """The camera in the input's pixels (the whole photo as decoded, principal point at its centre), and the
-    working frame's (the crop the fit worked on)."""
+def _camera(result: FitOutput, file_size: list[int] | None = None) -> dict:
+    """The camera in the input's pixels (the whole photo as decoded, principal point at its centre), the working
+    frame's (the crop the fit worked on), and, for a photo decoded smaller than its file (``file_size``, above
+    LOAD_MAX_SIDE), the file's."""
     framing = result.framing
     width, height = framing.input_size
     working_width, working_height = framing.size
-    return {"focal_px": float(result.focal) / framing.scale, "width": width, "height": height,
-            "principal_point": [width / 2, height / 2], "working_scale": framing.scale,
-            "pixels": "the input frame's as decoded (x right, y down, pixel centres at +0.5)",
-            "working": {"focal_px": float(result.focal), "width": working_width, "height": working_height,
-                        "principal_point": [round(v, 4) for v in framing.principal_point]}}
+    focal = float(result.focal) / framing.scale
+    camera = {"focal_px": focal, "width": width, "height": height,
+              "principal_point": [width / 2, height / 2], "working_scale": framing.scale,
+              "pixels": "the input frame's as decoded (x right, y down, pixel centres at +0.5)",
+              "working": {"focal_px": float(result.focal), "width": working_width, "height": working_height,
+                          "principal_point": [round(v, 4) for v in framing.principal_point]}}
+    if file_size is not None and tuple(file_size) != (width, height):
+        ratio = max(file_size) / max(width, height)
+        camera["file"] = {"focal_px": focal * ratio, "width": int(file_size[0]), "height": int(file_size[1]),
+                          "principal_point": [file_size[0] / 2, file_size[1] / 2]}
+    return camera
 
 
 def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
