@@ -102,15 +102,16 @@ class Framing:
     def record(self) -> dict:
         """What params.json says of the crop (input pixels) and the working frames."""
         return {"input_size": list(self.input_size), "box": [round(v, 3) for v in self.box],
-                "size": list(self.size), "scale": self.scale, "factors": list(self.factors),
+                "origin": list(self.origin), "size": list(self.size), "scale": self.scale,
+                "factors": list(self.factors),
                 "scene_size": list(self.scene_size), "scene_offset": list(self.scene_offset),
                 "principal_point": [round(v, 4) for v in self.principal_point]}
 
     @classmethod
     def from_record(cls, record: dict) -> Framing:
         """The framing :meth:`record` wrote."""
-        left, top = record["box"][:2]
-        return cls(tuple(record["input_size"]), tuple(record["size"]), tuple(record["factors"]), (left, top))
+        origin = record.get("origin", record["box"][:2])  # the box's corner, rounded, before "origin" was kept
+        return cls(tuple(record["input_size"]), tuple(record["size"]), tuple(record["factors"]), tuple(origin))
 
 
 def face_box(points: list[np.ndarray], input_size: tuple[int, int]) -> tuple[float, float, float, float]:
