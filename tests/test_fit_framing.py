@@ -236,6 +236,16 @@ def test_the_fit_of_the_crop_lands_on_the_canvas_pixels(canvas, cropped_fit, tmp
     again = to_uint8(loaded.composite_photo(loaded.render()[0], 0).numpy(), srgb=True).astype(int)
     assert np.abs(again - written).max() <= 1
     assert loaded.framing.scene_offset == fit.framing.scene_offset
+    # the commands that re-use a fit write the whole photo too
+    from typer.testing import CliRunner
+
+    from deface.cli.main import app
+
+    result = CliRunner().invoke(app, ["relight", str(folder), "-o", str(tmp_path / "relit"), "--light", "studio"])
+    assert result.exit_code == 0, result.output
+    relit = np.asarray(Image.open(tmp_path / "relit" / "render.png")).astype(int)
+    assert relit.shape[:2] == (CANVAS[1], CANVAS[0]) and np.abs(relit - photo)[outside].max() <= 1
+    assert np.asarray(Image.open(tmp_path / "relit" / "render_face.png")).shape[:2] == tuple(fit.framing.size[::-1])
 
 
 def _by_hand(canvas: Canvas, box: tuple[int, int, int, int]) -> tuple[np.ndarray, Landmarks]:
