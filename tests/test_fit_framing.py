@@ -327,3 +327,19 @@ def test_a_photo_decoded_smaller_than_its_file_also_gets_the_file_s_camera(cropp
     exif[0x0112] = 6  # stored landscape, shown portrait
     rotated.save(tmp_path / "rotated.jpg", exif=exif)
     assert image_size(tmp_path / "rotated.jpg") == (30, 40)
+
+
+def test_the_texture_size_follows_the_face_s_pixels_and_an_explicit_size_wins(canvas):
+    """The same face at its own pixels and at half of them: maps of twice the side (a power of two within the
+    range), unless texture_size is given."""
+    from deface.fit.pipeline import prepare
+
+    sizes = []
+    for cap in (256, 64):  # the 128-px crop at scale 1, then at scale 1/2
+        config = _config(resolution=cap, texture_size=None, texture_size_range=(16, 4096),
+                         **{"iterations.stage1": 60})
+        context, _ = prepare(frame_target([canvas.image], [canvas.landmarks], config), config)
+        sizes.append(context.texture_size)
+    assert sizes[0] == 2 * sizes[1] and sizes[1] >= 32, sizes
+    config = _config(resolution=256, texture_size=96, **{"iterations.stage1": 60})
+    assert prepare(frame_target([canvas.image], [canvas.landmarks], config), config)[0].texture_size == 96
