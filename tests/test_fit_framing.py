@@ -304,6 +304,10 @@ def test_a_clip_has_one_crop_around_every_frame_s_face(canvas):
         assert (found.points.max(0) <= np.array([right, bottom]) + 1e-3).all()
     assert len(target.frames_srgb) == 2 and target.frames_srgb[0].shape == target.frames_srgb[1].shape
     assert np.allclose(framing.to_input(target.landmarks[1].points), shifted.points, atol=1e-4)
+    # every frame's pixels cost the fit again: a clip has its own cap, a photo does not
+    capped = _config(clip_resolution=64)
+    assert max(frame_target([canvas.image, moved], [canvas.landmarks, shifted], capped).size) == 64
+    assert frame_target([canvas.image], [canvas.landmarks], capped).framing.scale == 1.0
 
 
 @pytest.mark.parametrize("setting", ["crop.margin=0.5", "texture_size_range=1024,512", "stage2_resolution=-1"])

@@ -137,7 +137,8 @@ Priors = Annotated[str | None, typer.Option(help="Ablation: priors to use, comma
                                                  "(config: priors.global_prior, local_prior, human_prior)")]
 Resolution = Annotated[int | None, typer.Option(help="Cap on the working image's longest side (32-2048 px; the "
                                                      "image is the crop around the face at the photo's own "
-                                                     "scale, never upsampled; default 512). (config: resolution)")]
+                                                     "scale, never upsampled; default 512; a clip: also "
+                                                     "clip_resolution, 256). (config: resolution)")]
 TextureSize = Annotated[int | None, typer.Option("--texture-size", help="UV texture side (16-4096 texels; default: "
                                                                      "what the face's pixels support, 512-1024). "
                                                                      "(config: texture_size)")]

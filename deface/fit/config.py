@@ -327,6 +327,10 @@ class FitConfig:
     works at the photo's own scale up to this, never upsampled. 512 puts a face of up to about 256 pixels
     across in the working image (the paper's 256² crops hold faces of about 150); stage 2 runs at
     ``stage2_resolution`` or less, stage 3 at this size."""
+    clip_resolution: int = 256
+    """The same cap for a clip of several frames (with ``resolution`` if that is smaller): every frame's pixels
+    cost the fit again, and the frames together constrain the shared maps. 8 frames of 480² at 480 instead of 256
+    took stage 3 ~3.5x the time and memory (BENCHMARKS.md)."""
     crop: CropConfig = field(default_factory=CropConfig)
     """The crop around the face."""
     stage2_resolution: int = 256
@@ -385,9 +389,9 @@ class FitConfig:
         if not 16 <= low <= high <= 4096:
             raise ValueError(f"texture_size_range must be two sizes with 16 <= smallest <= largest <= 4096, got "
                              f"{self.texture_size_range}")
-        if self.resolution < 1 or self.stage2_resolution < 0:
-            raise ValueError(f"resolution must be positive and stage2_resolution at least 0, got {self.resolution} "
-                             f"and {self.stage2_resolution}")
+        if min(self.resolution, self.clip_resolution) < 1 or self.stage2_resolution < 0:
+            raise ValueError("resolution and clip_resolution must be positive and stage2_resolution at least 0, got "
+                             f"{self.resolution}, {self.clip_resolution} and {self.stage2_resolution}")
 
 
 RENAMED = {

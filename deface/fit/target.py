@@ -76,10 +76,12 @@ class FitTarget:
 def frame_target(frames: list[np.ndarray], landmarks: list[Landmarks], config: FitConfig,
                  kept_frames: list[int] | None = None) -> FitTarget:
     """The target of input ``frames`` (sRGB [H0, W0, 3], all of one size) whose ``landmarks`` were found on
-    them: cropped around the face and resized to the working scale (deface/fit/framing.py)."""
+    them: cropped around the face and resized to the working scale (deface/fit/framing.py), at most
+    ``config.resolution`` pixels on the longer side (a clip of several frames: ``clip_resolution`` too)."""
     input_size = (frames[0].shape[1], frames[0].shape[0])
     box = face_box([found.points for found in landmarks], input_size) if config.crop.enabled else None
-    framing = choose_framing(input_size, box, config.resolution, config.crop.margin)
+    cap = config.resolution if len(frames) == 1 else min(config.resolution, config.clip_resolution)
+    framing = choose_framing(input_size, box, cap, config.crop.margin)
     scene = [resize_max(frame, max(framing.scene_size))[0] for frame in frames]
     (left, top), (width, height) = framing.scene_offset, framing.size
     crops = [np.ascontiguousarray(image[top:top + height, left:left + width]) for image in scene]
