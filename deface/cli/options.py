@@ -45,7 +45,7 @@ class Range:
 # Working image: below 32 px the face has too few pixels for the fields; above 2048 px one fit needs
 # several GB and hours. Lights and bands: each light adds a render per step, each band 2B+1 coefficients.
 RANGES = {
-    "--resolution": Range(32, 2048, "a number of pixels (longest side of the working image)"),
+    "--resolution": Range(32, 2048, "a number of pixels (the working image's longest side at most)"),
     "--texture-size": Range(16, 4096, "a number of texels (side of the UV maps)"),
     "--lights": Range(1, 16, "a number of light conditions"),
     "--bands": Range(1, 16, "a number of SH bands"),
@@ -135,11 +135,13 @@ FaceRegion = Annotated[bool | None, typer.Option("--face-region/--no-face-region
                                                       "decouple.face_region]")]
 Priors = Annotated[str | None, typer.Option(help="Ablation: priors to use, comma list of gp,lp,hp or none. "
                                                  "(config: priors.global_prior, local_prior, human_prior)")]
-Resolution = Annotated[int | None, typer.Option(help="Working resolution (longest side, 32-2048 px). "
-                                                     "(config: resolution)")]
-TextureSize = Annotated[int | None, typer.Option("--texture-size", help="UV texture side (16-4096 texels; the "
-                                                                     "preset's default is 512). (config: "
-                                                                     "texture_size)")]
+Resolution = Annotated[int | None, typer.Option(help="Cap on the working image's longest side (32-2048 px; the "
+                                                     "image is the crop around the face at the photo's own "
+                                                     "scale, never upsampled; default 512; a clip: also "
+                                                     "clip_resolution, 256). (config: resolution)")]
+TextureSize = Annotated[int | None, typer.Option("--texture-size", help="UV texture side (16-4096 texels; default: "
+                                                                     "what the face's pixels support, 512-1024). "
+                                                                     "(config: texture_size)")]
 Iterations = Annotated[str | None, typer.Option(help="Iterations per stage as S1,S2,S3 (e.g. 300,400,200). "
                                                      "(config: iterations.stage1, stage2, stage3)")]
 MaxFrames = Annotated[int | None, typer.Option(help="Video: number of frames used (evenly spread). "

@@ -80,7 +80,7 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
         f'height="{SPHERE_SIZE}"><figcaption>light {k}: sphere and mask M_L</figcaption></figure>' for k in fit.kept)
     body = f"""<h1>deface fit {html.escape(name)}</h1>
 <h2>Input and result</h2>
-<div class="row">{_figure(f"{REPORT_DIR}/input.png", "input (working resolution)")}
+<div class="row">{_figure(f"{REPORT_DIR}/input.png", "input: the working image (the crop around the face)")}
 {_figure(f"{base}render.png", "I_out: the fit composited into the photo")}
 {_figure(f"{base}render_face.png", "I_R: the rendered face")}</div>
 <h2>Lights kept ({len(fit.kept)} of {fit.lights.shape[0]}) and the face region</h2>
