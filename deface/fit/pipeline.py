@@ -32,6 +32,7 @@ from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.ita import texture_tone
 from deface.models.registry import load_face_model
+from deface.priors.checker import CheckerUnavailable, checker_illuminant, find_checker
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
 from deface.priors.illuminant import estimate_illuminant, known_illuminant
@@ -181,8 +182,9 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     classifier, note = _face_classifier(face, target, config, models_dir, log)
     scene_light = None
     if config.tone.scene_light_prior:
-        illuminant = _scene_illuminant(face, target, config)
-        log.info(f"scene illuminant: {illuminant.source}, white level "
+        illuminant = _scene_illuminant(face, target, config, log)
+        where = f" ({illuminant.detail})" if illuminant.detail else ""
+        log.info(f"scene illuminant: {illuminant.source}{where}, white level "
                  f"{np.round(illuminant.white, 3).tolist()}, {illuminant.cct:.0f} K")
         scene_light = start_from_scene(face, target.frames_srgb, classifier, illuminant, config, log)
     elif config.tone.illuminant.white is not None or config.tone.illuminant.reference_box is not None:
@@ -220,14 +222,37 @@ def _face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, mode
 
 
 @torch.no_grad()
-def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig):
-    """The white level the user gives (or points a reference card at), else the estimate from every frame's
-    pixels outside the stage-1 face."""
-    known = known_illuminant(target.frames_srgb, config.tone.illuminant)
+def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig, log: FitLog):
+    """The white level the user gives (or points a reference card at), else a colour checker's in the photo,
+    else the estimate from every frame's pixels outside the stage-1 face."""
+    known = known_illuminant(target.frames_srgb, config.tone.illuminant, target.scale)
     if known is not None:
         return known
+    checker = _checker_illuminant(target, config.tone.illuminant, log)
+    if checker is not None:
+        return checker
     faces = [face.fragments(frame)[1].mask.numpy() > 0 for frame in range(target.num_frames)]
     return estimate_illuminant(target.frames_srgb, faces, config.tone.illuminant)
+
+
+def _checker_illuminant(target: FitTarget, settings, log: FitLog):
+    """W from a colour checker in the first frame (``tone.illuminant.checker``), or None, said in the log;
+    ValueError (one line) when it is required ("on") and unavailable or not found."""
+    if settings.checker == "off":
+        return None
+    try:
+        reading = find_checker(target.frames_srgb[0])
+    except CheckerUnavailable as error:
+        if settings.checker == "on":
+            raise ValueError(f"tone.illuminant.checker=on: {error}") from None
+        log.info(f"{error}; the light's level is estimated from the scene")
+        return None
+    if reading is None:
+        if settings.checker == "on":
+            raise ValueError("tone.illuminant.checker=on: no colour checker found in the photo (its six grey "
+                             "patches must show, unclipped)")
+        return None
+    return checker_illuminant(reading, settings)
 
 
 def _classifier(source: str, models_dir):

@@ -39,7 +39,8 @@ When the user knows the light, the estimate steps aside (:func:`known_illuminant
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
+from typing import Literal
 
 import numpy as np
 from scipy import ndimage
@@ -102,27 +103,48 @@ class IlluminantConfig:
     in params.json) for every photo taken under the same light. Used instead of the estimate."""
     reference_box: tuple[float, float, float, float] | None = None
     """Left, top, right, bottom of a grey or white card, or any flat matte surface of known reflectance, in the
-    photo, as fractions of its width and height (a card at pixels 300-420 across and 900-1000 down a 1200 x 1600
-    photo: 0.25,0.5625,0.35,0.625; in every frame of a clip: a fixed camera). W is its median linear colour over
-    ``reference_reflectance``, used instead of the estimate. Held at the face and facing the camera it sees the
-    key light at the camera's angle, a little less than a surface facing the light (cos 30 degrees = 0.87), so
-    the skin comes out that much lighter."""
+    photo (``deface fit --card``): as fractions of its width and height when every value is at most 1 (a card at
+    pixels 300-420 across and 900-1000 down a 1200 x 1600 photo: 0.25,0.5625,0.35,0.625), else as pixels of the
+    input image (300,900,420,1000); in every frame of a clip (a fixed camera). W is its median linear colour over
+    ``reference_reflectance``, corrected for how the card faces (``reference_facing``), used instead of the
+    estimate."""
     reference_reflectance: float = 0.18
-    """Reflectance of the reference surface: 0.18 for a photographic grey card, about 0.9 for white paper."""
+    """Reflectance of the reference surface: 0.18 for a photographic grey card, about 0.9 for white paper
+    (``deface fit --card-reflectance``)."""
+    reference_facing: Literal["camera", "light"] = "camera"
+    """How the card (or colour checker) was held. "camera": beside the face, facing the camera, as people hold
+    one: it then receives the light a surface facing the camera gets, less than the skin facing the key light
+    (on renders with the key 40-55 degrees off the camera: 15-30 % less), and W is its reading times the ratio of
+    the skin's key-light envelope at the 90th percentile to the envelope at the camera's direction (the lights
+    read off the face, deface/fit/scene_light.py; docs/skin-tone.md). "light": turned towards the key light; no
+    correction."""
+    checker: Literal["auto", "on", "off"] = "auto"
+    """Look for an X-Rite ColorChecker (Classic, Passport, Nano or SG) in the photo (deface/priors/checker.py,
+    the ``checker`` extra: colour-checker-detection): its grey patches of known reflectance give W, corrected for
+    its orientation as a card is. "auto": when the package is installed (the log says when it is not), and only
+    a detection whose six grey patches read as a neutral ramp of the known reflectances counts; "on": an error
+    when the package is missing or no checker is found; "off": never."""
 
     def __post_init__(self) -> None:
         if self.white is not None and min(self.white) <= 0:
             raise ValueError(f"tone.illuminant.white must be positive in every channel, got {self.white}")
         if self.reference_box is not None:
             left, top, right, bottom = self.reference_box
-            if not (0.0 <= left < right <= 1.0 and 0.0 <= top < bottom <= 1.0):
-                raise ValueError("tone.illuminant.reference_box is left,top,right,bottom as fractions of the image "
-                                 f"(0 <= left < right <= 1, 0 <= top < bottom <= 1), got {self.reference_box}")
+            if not (0.0 <= left < right and 0.0 <= top < bottom) or (
+                    max(self.reference_box) <= 1.0 and not (right <= 1.0 and bottom <= 1.0)):
+                raise ValueError("tone.illuminant.reference_box (--card) is left,top,right,bottom, as fractions of "
+                                 "the image (0 <= left < right <= 1, 0 <= top < bottom <= 1) or as pixels, got "
+                                 f"{','.join(f'{v:g}' for v in self.reference_box)}")
             if self.white is not None:
-                raise ValueError("give tone.illuminant.white or tone.illuminant.reference_box, not both")
+                raise ValueError("give the white level (--white, tone.illuminant.white) or a card (--card, "
+                                 "tone.illuminant.reference_box), not both")
         if not 0.0 < self.reference_reflectance <= 1.0:
             raise ValueError("tone.illuminant.reference_reflectance must be in (0, 1], "
                              f"got {self.reference_reflectance}")
+
+
+CARD_SOURCES = ("reference card", "colour checker")
+"""Sources whose reading is of a surface in the photo held at the face, corrected for how it faces."""
 
 
 @dataclass(frozen=True)
@@ -131,15 +153,26 @@ class IlluminantEstimate:
 
     white: np.ndarray  # [3] linear RGB a white surface facing the key light shows
     cct: float  # correlated colour temperature (K) of the light
-    source: str  # "white patch", "grey world", "fallback", "given" or "reference card"
+    source: str  # "white patch", "grey world", "fallback", "given", "reference card" or "colour checker"
     colour_weight: float  # in [0, 1]: how much of the colour came from the scene (the rest: the white point)
     scene_pixels: int  # usable pixels outside the face
     level_sigma: float = 0.0  # natural-log spread of W's level: the estimate's one sigma (0: the user's W)
+    orientation: float = 1.0  # a card's reading was multiplied by this for facing the camera (1: not corrected)
+    detail: str = ""  # where the level came from, in words (the log and report.html say it)
+    cues: tuple = field(default_factory=tuple)  # LevelCue readings of the light's level that were weighed
 
     def record(self) -> dict:
         return {"white": [round(float(v), 5) for v in self.white], "cct": round(self.cct, 1),
                 "source": self.source, "colour_weight": round(self.colour_weight, 4),
-                "scene_pixels": self.scene_pixels, "level_sigma": round(self.level_sigma, 4)}
+                "scene_pixels": self.scene_pixels, "level_sigma": round(self.level_sigma, 4),
+                "orientation": round(self.orientation, 4), "detail": self.detail,
+                "cues": [cue.record() for cue in self.cues]}
+
+    def facing_corrected(self, ratio: float) -> IlluminantEstimate:
+        """This card reading times ``ratio``: the light a surface facing the key light gets over what the card,
+        facing the camera, got."""
+        detail = f"{self.detail}; x{ratio:.2f} for facing the camera rather than the key light"
+        return replace(self, white=self.white * ratio, orientation=self.orientation * ratio, detail=detail)
 
 
 def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarray],
@@ -166,22 +199,43 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
                               int(usable.sum()), level_sigma)
 
 
-def known_illuminant(frames_srgb: list[np.ndarray], config: IlluminantConfig) -> IlluminantEstimate | None:
-    """W as given (``white``) or read off a reference card (``reference_box``) in frames [H, W, 3] sRGB, or None
-    when neither is set. ValueError (one line) when the box shows too little of the card to read."""
+def known_illuminant(frames_srgb: list[np.ndarray], config: IlluminantConfig,
+                     scale: float = 1.0) -> IlluminantEstimate | None:
+    """W as given (``white``) or read off a reference card (``reference_box``) in frames [H, W, 3] sRGB (the
+    working frames, ``scale`` times the input's size: a box in pixels is of the input image), or None when
+    neither is set. ValueError (one line) when the box shows too little of the card to read. The card's reading
+    is not yet corrected for how it faces (:meth:`IlluminantEstimate.facing_corrected`, from the face's lights)."""
     if config.white is not None:
         white = np.asarray(config.white, dtype=np.float64)
-        return IlluminantEstimate(white, _cct(white, config), "given", 1.0, 0)
+        return IlluminantEstimate(white, cct_of(white, config), "given", 1.0, 0, detail="given (tone.illuminant.white)")
     if config.reference_box is None:
         return None
-    pixels = np.concatenate([_box(frame, config.reference_box).reshape(-1, 3) for frame in frames_srgb])
+    box = _fractions(config.reference_box, frames_srgb[0].shape, scale)
+    shown = ",".join(f"{v:g}" for v in config.reference_box)
+    pixels = np.concatenate([_box(frame, box).reshape(-1, 3) for frame in frames_srgb])
     linear = srgb_to_linear(pixels)
     usable = _readable(pixels, linear, config)
     if usable.mean() < 0.5:
-        raise ValueError(f"tone.illuminant.reference_box {list(config.reference_box)}: {100 * (1 - usable.mean()):.0f} "
-                         "% of it is clipped or nearly black; choose a part of the card that is neither")
+        raise ValueError(f"the card's box {shown} (--card, tone.illuminant.reference_box): "
+                         f"{100 * (1 - usable.mean()):.0f} % of it is clipped or nearly black; choose a part of the "
+                         "card that is neither, or expose the photo so the card is not blown out")
     white = np.median(linear[usable], axis=0).astype(np.float64) / config.reference_reflectance
-    return IlluminantEstimate(white, _cct(white, config), "reference card", 1.0, int(usable.sum()))
+    detail = f"a card of {100 * config.reference_reflectance:.0f} % reflectance at {shown}"
+    return IlluminantEstimate(white, cct_of(white, config), "reference card", 1.0, int(usable.sum()), detail=detail)
+
+
+def _fractions(box: tuple[float, float, float, float], shape: tuple[int, ...],
+               scale: float) -> tuple[float, float, float, float]:
+    """``box`` as fractions of the image: as it is when every value is at most 1, else pixels of the input image
+    (the working frame of ``shape`` is ``scale`` times its size). ValueError when the pixels lie outside it."""
+    if max(box) <= 1.0:
+        return box
+    width, height = shape[1] / scale, shape[0] / scale
+    left, top, right, bottom = box
+    if right > width + 0.5 or bottom > height + 0.5:
+        raise ValueError(f"the card's box {','.join(f'{v:g}' for v in box)} (--card, pixels) reaches beyond the "
+                         f"{round(width)} x {round(height)} image")
+    return left / width, top / height, min(right / width, 1.0), min(bottom / height, 1.0)
 
 
 def _readable(pixels: np.ndarray, linear: np.ndarray, config: IlluminantConfig) -> np.ndarray:
@@ -257,7 +311,7 @@ def plausible_cct(linear_rgb: np.ndarray, config: IlluminantConfig) -> tuple[flo
     return 1e6 / mired, weight
 
 
-def _cct(linear_rgb: np.ndarray, config: IlluminantConfig) -> float:
+def cct_of(linear_rgb: np.ndarray, config: IlluminantConfig) -> float:
     """The colour temperature (K, within ``cct_range``) nearest a light of colour ``linear_rgb`` [3]."""
     return float(np.clip(_cct_duv(linear_rgb, config)[0], *config.cct_range))
 
