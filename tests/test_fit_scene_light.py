@@ -5,6 +5,8 @@ white turban classified as skin. Each must leave the estimate where the clean sk
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 from skimage.color import lab2rgb
@@ -191,3 +193,46 @@ def test_red_clipped_on_all_the_lit_skin_takes_the_colour_from_the_rest():
     assert (over.srgb[lit, 0] >= 0.98).mean() > 0.99
     ratio = lit_skin_albedo(over, white) / albedo
     assert ratio == pytest.approx(np.full(3, ratio.mean()), rel=0.05)  # the colour, in every channel alike
+
+
+def card_facing_camera_ratio(normals: np.ndarray) -> float:
+    """The truth of ``facing_camera_ratio`` for ``photo``'s light: the light's white response at the key quantile
+    of the skin's normals over its response at the camera's direction (+z), where a card facing the camera is."""
+    shading = AMBIENT + (1 - AMBIENT) * np.clip(normals @ KEY, 0, None)
+    return float(np.quantile(shading, scene_light.KEY_QUANTILE) / (AMBIENT + (1 - AMBIENT) * KEY[2]))
+
+
+@pytest.mark.parametrize("ita", [-30.0, 10.0, 50.0])
+def test_a_card_facing_the_camera_is_corrected_to_the_light_facing_the_key(ita):
+    """A card beside the face, facing the camera, gets less of a key light 35 degrees off the camera than the skin
+    facing it; the ratio comes from the face's own shading, whatever the skin's tone (within 4 %)."""
+    normals = hemisphere()
+    truth = card_facing_camera_ratio(normals)
+    assert truth > 1.05  # the key light is well off the camera
+    ratio = scene_light.facing_camera_ratio(photo(skin_albedo(ita), 0.8 * np.ones(3), normals), np.ones(3))
+    assert ratio == pytest.approx(truth, rel=0.04)
+
+
+def test_a_key_light_at_the_camera_needs_almost_no_card_correction(monkeypatch):
+    """The card then gets the light's peak, a little above W, which is the light at the skin's key quantile."""
+    monkeypatch.setattr(sys.modules[__name__], "KEY", np.array([0.0, 0.0, 1.0]))
+    normals = hemisphere()
+    ratio = scene_light.facing_camera_ratio(photo(skin_albedo(30.0), 0.8 * np.ones(3), normals), np.ones(3))
+    assert ratio == pytest.approx(card_facing_camera_ratio(normals), rel=0.03)
+    assert 0.9 < ratio <= 1.0
+
+
+def test_the_card_correction_scales_w_and_says_so():
+    from deface.fit.log import FitLog
+    from deface.priors.illuminant import IlluminantEstimate
+
+    card = IlluminantEstimate(np.array([0.5, 0.5, 0.5]), 6504.0, "reference card", 1.0, 100, detail="a card")
+    pixels, log = photo(skin_albedo(30.0), 0.8 * np.ones(3), hemisphere()), FitLog(quiet=True)
+    corrected = scene_light.facing_illuminant(card, pixels, "camera", log)
+    ratio = corrected.orientation
+    assert ratio > 1.05 and corrected.white == pytest.approx(card.white * ratio)
+    assert corrected.record()["orientation"] == pytest.approx(ratio, abs=1e-4) and "facing the camera" in corrected.detail
+    assert any("facing the camera" in note for note in log.notes)
+    assert scene_light.facing_illuminant(card, pixels, "light", log) is card  # held towards the light: as read
+    estimate = IlluminantEstimate(np.ones(3), 6504.0, "grey world", 1.0, 100, 0.5)
+    assert scene_light.facing_illuminant(estimate, pixels, "camera", log) is estimate

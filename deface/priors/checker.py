@@ -72,6 +72,15 @@ def detector():
     return detect_colour_checkers_segmentation
 
 
+def available() -> bool:
+    """Whether colour-checker-detection can be imported."""
+    try:
+        detector()
+    except CheckerUnavailable:
+        return False
+    return True
+
+
 def find_checker(frame_srgb: np.ndarray) -> CheckerReading | None:
     """The colour checker in ``frame_srgb`` [H, W, 3] (sRGB in [0, 1]) whose grey row reads as a neutral ramp of
     the known reflectances, or None; CheckerUnavailable without the package."""
