@@ -6,7 +6,8 @@ ColorChecker held beside the face. Scenes alternate between a ``tune`` part (cho
 
     .venv/bin/python benchmarks/tone_truth.py chart OUT          # OUT/checker.png, the ColorChecker's texture
     blender -b -P benchmarks/blender/tone_scenes.py -- OUT --variants plain,white
-    blender -b -P benchmarks/blender/tone_scenes.py -- OUT --only studio,highkey,outdoor,bluegrey,tungsten --variants card
+    blender -b -P benchmarks/blender/tone_scenes.py -- OUT --variants card \
+        --only studio,highkey,outdoor,bluegrey,tungsten
     blender -b -P benchmarks/blender/tone_scenes.py -- OUT --only studio,bluegrey --variants checker
     .venv/bin/python benchmarks/tone_truth.py make OUT          # OUT/images/*.png, OUT/MANIFEST.tsv, OUT/sets/*
     DEFACE_MODELS=../shared/models .venv/bin/python benchmarks/tone_truth.py starts OUT [--split tune] [--variant card]
@@ -111,7 +112,8 @@ def make(out: Path) -> None:
         for mode in EXPOSURES:
             factor = exposure(linear, mode)
             name = f"{meta['scene']}_{meta['tone']}_{meta['variant']}_{mode}.png"
-            cv2.imwrite(str(out / "images" / name), (_srgb(linear * factor)[..., ::-1] * 255 + 0.5).astype(np.uint8))
+            encoded = (_srgb(linear * factor)[..., ::-1] * 255 + 0.5).astype(np.uint8)
+            cv2.imwrite(str(out / "images" / name), encoded)
             box = meta["box"]
             rows.append({"file": name, "tone_group": GROUP[meta["tone"]], "gt_ita": GT_ITA[meta["tone"]],
                          "scene": meta["scene"], "split": meta["split"], "variant": meta["variant"], "exposure": mode,

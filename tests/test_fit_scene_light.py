@@ -231,7 +231,8 @@ def test_the_card_correction_scales_w_and_says_so():
     corrected = scene_light.facing_illuminant(card, pixels, "camera", log)
     ratio = corrected.orientation
     assert ratio > 1.05 and corrected.white == pytest.approx(card.white * ratio)
-    assert corrected.record()["orientation"] == pytest.approx(ratio, abs=1e-4) and "facing the camera" in corrected.detail
+    assert corrected.record()["orientation"] == pytest.approx(ratio, abs=1e-4)
+    assert "facing the camera" in corrected.detail
     assert any("facing the camera" in note for note in log.notes)
     assert scene_light.facing_illuminant(card, pixels, "light", log) is card  # held towards the light: as read
     estimate = IlluminantEstimate(np.ones(3), 6504.0, "grey world", 1.0, 100, 0.5)

@@ -110,7 +110,8 @@ def test_a_card_box_in_pixels_reads_as_its_fractions():
     fractions = known_illuminant([srgb], IlluminantConfig(reference_box=(30 / 384, 40 / 384, 90 / 384, 80 / 384)))
     working = srgb[::2, ::2]  # the fit's frame at half the input's size
     pixels = known_illuminant([working], IlluminantConfig(reference_box=(30, 40, 90, 80)), scale=0.5)
-    assert fractions.white == pytest.approx(LIGHT, rel=0.02) and pixels.white == pytest.approx(fractions.white, rel=0.01)
+    assert fractions.white == pytest.approx(LIGHT, rel=0.02)
+    assert pixels.white == pytest.approx(fractions.white, rel=0.01)
     assert pixels.source == "reference card" and "18 %" in pixels.detail
     with pytest.raises(ValueError, match="beyond the 384 x 384 image") as error:
         known_illuminant([working], IlluminantConfig(reference_box=(300, 300, 500, 400)), scale=0.5)
@@ -132,7 +133,8 @@ def test_white_reuses_a_finished_fits_level(tmp_path):
     """A batch under one setup: W from the fit of one photo with a card applies to the rest."""
     run = tmp_path / "card_photo"
     run.mkdir()
-    (run / "params.json").write_text(json.dumps({"illuminant": {"white": [0.91, 0.8, 0.62], "source": "reference card"}}))
+    recorded = {"illuminant": {"white": [0.91, 0.8, 0.62], "source": "reference card"}}
+    (run / "params.json").write_text(json.dumps(recorded))
     assert fit_config(white=str(run)).tone.illuminant.white == pytest.approx((0.91, 0.8, 0.62))
     assert fit_config(white=str(run / "params.json")).tone.illuminant.white == pytest.approx((0.91, 0.8, 0.62))
     (tmp_path / "no_light").mkdir()

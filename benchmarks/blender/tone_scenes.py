@@ -63,7 +63,7 @@ def arguments():
     out = Path(args[0])
     options = {"--samples": "32", "--only": ",".join(SCENES), "--tones": ",".join(TONES),
                "--variants": "plain"}
-    for flag, value in zip(args[1::2], args[2::2]):
+    for flag, value in zip(args[1::2], args[2::2], strict=False):
         options[flag] = value
     return out, int(options["--samples"]), options["--only"].split(","), options["--tones"].split(","), \
         options["--variants"].split(",")
