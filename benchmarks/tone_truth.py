@@ -134,7 +134,8 @@ def make(out: Path) -> None:
                 if not link.exists():
                     link.symlink_to(out / "images" / row["file"])
             _write_tsv(folder / "MANIFEST.tsv", chosen)
-    print(f"{len(rows)} images in {out / 'images'}; sets: {', '.join(sorted(p.name for p in (out / 'sets').iterdir()))}")
+    sets = ", ".join(sorted(p.name for p in (out / "sets").iterdir()))
+    print(f"{len(rows)} images in {out / 'images'}; sets: {sets}")
 
 
 def _write_tsv(path: Path, rows: list[dict]) -> None:
