@@ -15,7 +15,7 @@ ColorChecker held beside the face. Scenes alternate between a ``tune`` part (cho
 (Blender 3.4, Debian's ``blender`` package; 78 renders at 512 x 512, 32 samples: about 10 s each on a free core.)
 ``make`` exposes each scene-linear render three ways: ``manual`` (exposure 1: the scene's light strength decides
 how bright the photo is), ``average`` (the frame's mean luminance at 18 %, as an averaging meter sets it) and
-``centre`` (the same with the central circle, a third of the frame's width across, weighing three times the rest),
+``centre`` (the same with the central circle, a fifth of the frame's width in radius, given 75 % of the weight),
 and writes ``OUT/sets/<split>-<variant>/`` for ``deface bench skin-tone`` (MANIFEST.tsv with ``gt_ita``, and a
 ``settings`` column giving a card's box). ``true_white``: the luminance a white surface facing the key light shows
 in that exposure, read from the scene's ``white`` render (80 % albedo, no specular: the 90th percentile over the
@@ -44,7 +44,9 @@ GT_ITA = {"ita50": 50.45, "ita30": 29.79, "ita10": 9.95, "ita-10": -9.82, "ita-3
 GROUP = {"ita50": "light", "ita30": "medium", "ita10": "dark", "ita-10": "dark", "ita-30": "dark"}
 EXPOSURES = ("manual", "average", "centre")
 METER_GREY = 0.18
-CENTRE_WEIGHT = 3.0
+CENTRE_SHARE = 0.75
+"""A centre-weighted meter gives the central circle (a fifth of the frame's width in radius) this share of its weight
+(Nikon's and Canon's centre-weighted modes: 70-80 %)."""
 FACE_CENTRE = (0.35, 0.25, 0.65, 0.6)  # left, top, right, bottom: the face's cheeks and forehead in every scene
 WHITE_ALBEDO = 0.8
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -87,8 +89,8 @@ def exposure(linear: np.ndarray, mode: str) -> float:
         return METER_GREY / float(luminance.mean())
     height, width = luminance.shape
     yy, xx = np.mgrid[:height, :width]
-    centre = (xx - width / 2) ** 2 + (yy - height / 2) ** 2 <= (width / 6) ** 2
-    weights = np.where(centre, CENTRE_WEIGHT, 1.0)
+    centre = (xx - width / 2) ** 2 + (yy - height / 2) ** 2 <= (width / 5) ** 2
+    weights = np.where(centre, CENTRE_SHARE / centre.mean(), (1 - CENTRE_SHARE) / (1 - centre.mean()))
     return METER_GREY / float((luminance * weights).sum() / weights.sum())
 
 

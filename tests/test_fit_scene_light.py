@@ -15,7 +15,7 @@ from deface.fit import scene_light
 from deface.fit.scene_light import SKIN_F0, SkinPixels, lit_skin_albedo
 from deface.io.images import linear_to_srgb, srgb_to_linear
 from deface.models.ita import ita_of_srgb
-from deface.priors.illuminant import planckian_rgb
+from deface.priors.illuminant import IlluminantConfig, planckian_rgb
 
 KEY = np.array([0.45, 0.35, 0.82]) / np.linalg.norm([0.45, 0.35, 0.82])
 AMBIENT = 0.25
@@ -228,12 +228,33 @@ def test_the_card_correction_scales_w_and_says_so():
 
     card = IlluminantEstimate(np.array([0.5, 0.5, 0.5]), 6504.0, "reference card", 1.0, 100, detail="a card")
     pixels, log = photo(skin_albedo(30.0), 0.8 * np.ones(3), hemisphere()), FitLog(quiet=True)
-    corrected = scene_light.facing_illuminant(card, pixels, "camera", log)
+    corrected = scene_light.facing_illuminant(card, pixels, IlluminantConfig(), log)
     ratio = corrected.orientation
     assert ratio > 1.05 and corrected.white == pytest.approx(card.white * ratio)
     assert corrected.record()["orientation"] == pytest.approx(ratio, abs=1e-4)
     assert "facing the camera" in corrected.detail
     assert any("facing the camera" in note for note in log.notes)
-    assert scene_light.facing_illuminant(card, pixels, "light", log) is card  # held towards the light: as read
-    estimate = IlluminantEstimate(np.ones(3), 6504.0, "grey world", 1.0, 100, 0.5)
-    assert scene_light.facing_illuminant(estimate, pixels, "camera", log) is estimate
+    towards_light = IlluminantConfig(reference_facing="light")
+    assert scene_light.facing_illuminant(card, pixels, towards_light, log) is card  # held towards the light: as read
+    given = IlluminantEstimate(np.ones(3), 6504.0, "given", 1.0, 0)
+    assert scene_light.facing_illuminant(given, pixels, IlluminantConfig(), log) is given
+
+
+def test_the_scenes_reading_is_corrected_before_the_white_point_weighs_in():
+    """A grey world's level (surfaces facing the camera) is corrected like a card's, then combined with the photo's
+    white point by the same inverse variances as before: the correction's share of W is the scene's weight."""
+    from deface.fit.log import FitLog
+    from deface.priors.illuminant import IlluminantEstimate, _with_exposure_prior
+
+    level, sigma, exposure_sigma = 0.6, 0.7, 0.7
+    combined, spread = _with_exposure_prior(level, sigma, exposure_sigma)
+    estimate = IlluminantEstimate(combined * planckian_rgb(4000.0), 4000.0, "grey world", 1.0, 100, spread,
+                                  scene_reading=(level, sigma, exposure_sigma))
+    pixels = photo(skin_albedo(30.0), 0.8 * np.ones(3), hemisphere())
+    corrected = scene_light.facing_illuminant(estimate, pixels, IlluminantConfig(), FitLog(quiet=True))
+    ratio = corrected.orientation
+    assert ratio > 1.05
+    assert corrected.white == pytest.approx(estimate.white * ratio**0.5, rel=1e-6)  # equal weights: the square root
+    assert corrected.level_sigma == estimate.level_sigma
+    off = scene_light.facing_illuminant(estimate, pixels, IlluminantConfig(scene_facing=False), FitLog(quiet=True))
+    assert off is estimate

@@ -270,7 +270,7 @@ def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant
     place); returns the scene light the scene-light terms hold the fit to (a card's reading corrected for how it
     faces: :func:`facing_illuminant`)."""
     regions, pixels = face_skin(face, frames_srgb, classifier)
-    illuminant = facing_illuminant(illuminant, pixels, config.tone.illuminant.reference_facing, log)
+    illuminant = facing_illuminant(illuminant, pixels, config.tone.illuminant, log)
     white, scene = illuminant.white, face.scene
     with torch.no_grad():
         scene.lights.copy_(lights_scaled_to_white(scene.lights, white))
@@ -280,10 +280,13 @@ def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant
     return SceneLight(illuminant, kept)
 
 
-def facing_illuminant(illuminant: IlluminantEstimate, pixels: SkinPixels, facing: str, log) -> IlluminantEstimate:
-    """A card's or checker's reading corrected for facing the camera (:func:`facing_camera_ratio`), said in the
+def facing_illuminant(illuminant: IlluminantEstimate, pixels: SkinPixels, settings, log) -> IlluminantEstimate:
+    """A card's or checker's reading (``settings.reference_facing`` "camera"), or the scene's (white patch, grey
+    world; ``settings.scene_facing``), corrected for facing the camera (:func:`facing_camera_ratio`), said in the
     log; any other estimate as it is."""
-    if illuminant.source not in CARD_SOURCES or facing != "camera":
+    card = illuminant.source in CARD_SOURCES
+    if (card and settings.reference_facing != "camera") or (not card and (
+            not settings.scene_facing or illuminant.scene_reading is None)):
         return illuminant
     ratio = facing_camera_ratio(pixels, illuminant.white)
     if ratio is None:

@@ -39,7 +39,7 @@ When the user knows the light, the estimate steps aside (:func:`known_illuminant
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -118,6 +118,11 @@ class IlluminantConfig:
     the skin's key-light envelope at the 90th percentile to the envelope at the camera's direction (the lights
     read off the face, deface/fit/scene_light.py; docs/skin-tone.md). "light": turned towards the key light; no
     correction."""
+    scene_facing: bool = True
+    """The scene's reading (a white patch's or the grey world's level) is of surfaces that mostly face the camera (a
+    wall, a backdrop, a shirt), which get less of a key light off the camera's axis than the skin facing it, as a
+    card held facing the camera does: correct the reading by the same ratio from the face's lights before it is
+    combined with the photo's white point. Off: the reading is taken as that of surfaces facing the light."""
     checker: Literal["auto", "on", "off"] = "auto"
     """Look for an X-Rite ColorChecker (Classic, Passport, Nano or SG) in the photo (deface/priors/checker.py,
     the ``checker`` extra: colour-checker-detection): its grey patches of known reflectance give W, corrected for
@@ -159,20 +164,28 @@ class IlluminantEstimate:
     level_sigma: float = 0.0  # natural-log spread of W's level: the estimate's one sigma (0: the user's W)
     orientation: float = 1.0  # a card's reading was multiplied by this for facing the camera (1: not corrected)
     detail: str = ""  # where the level came from, in words (the log and report.html say it)
-    cues: tuple = field(default_factory=tuple)  # LevelCue readings of the light's level that were weighed
+    scene_reading: tuple[float, float, float] | None = None  # the scene's level, its log sigma and exposure_sigma
+    # before the two were combined (white patch, grey world), so a facing correction can combine them again
 
     def record(self) -> dict:
         return {"white": [round(float(v), 5) for v in self.white], "cct": round(self.cct, 1),
                 "source": self.source, "colour_weight": round(self.colour_weight, 4),
                 "scene_pixels": self.scene_pixels, "level_sigma": round(self.level_sigma, 4),
-                "orientation": round(self.orientation, 4), "detail": self.detail,
-                "cues": [cue.record() for cue in self.cues]}
+                "orientation": round(self.orientation, 4), "detail": self.detail}
 
     def facing_corrected(self, ratio: float) -> IlluminantEstimate:
-        """This card reading times ``ratio``: the light a surface facing the key light gets over what the card,
-        facing the camera, got."""
+        """A card's reading, or the scene's before it is combined with the photo's white point, times ``ratio``:
+        the light a surface facing the key light gets over what one facing the camera gets. Any other estimate
+        (given, the fallback) as it is."""
         detail = f"{self.detail}; x{ratio:.2f} for facing the camera rather than the key light"
-        return replace(self, white=self.white * ratio, orientation=self.orientation * ratio, detail=detail)
+        if self.source in CARD_SOURCES:
+            return replace(self, white=self.white * ratio, orientation=self.orientation * ratio, detail=detail)
+        if self.scene_reading is None:
+            return self
+        level, sigma, exposure_sigma = self.scene_reading
+        combined, _ = _with_exposure_prior(level * ratio, sigma, exposure_sigma)
+        white = self.white / float(self.white @ LUMINANCE) * combined
+        return replace(self, white=white, orientation=self.orientation * ratio, detail=detail)
 
 
 def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarray],
@@ -184,7 +197,7 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
     usable = _readable(pixels, linear, config)
     if usable.sum() < config.min_scene_fraction * total:
         return IlluminantEstimate(np.ones(3), config.neutral_cct, "fallback", 0.0, int(usable.sum()),
-                                  config.exposure_sigma)
+                                  config.exposure_sigma, detail="the photo's white point (too little scene to read)")
     grey_sigma = grey_world_spread(usable, config)
     patch = _white_patch(pixels, linear, grey_sigma, config)
     if patch is not None:
@@ -194,9 +207,12 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
         colour, level = grey_world(linear[usable], config)
         sigma, source = grey_sigma, "grey world"
     cct, weight = plausible_cct(colour, config)
-    level, level_sigma = _with_exposure_prior(level, sigma, config.exposure_sigma)
-    return IlluminantEstimate(level * planckian_rgb(cct, config.neutral_cct), cct, source, weight,
-                              int(usable.sum()), level_sigma)
+    combined, level_sigma = _with_exposure_prior(level, sigma, config.exposure_sigma)
+    detail = (f"the scene's {source} (level {level:.2f}, log sigma {sigma:.2f}) with the photo's white point "
+              f"(log sigma {config.exposure_sigma:.2f})")
+    return IlluminantEstimate(combined * planckian_rgb(cct, config.neutral_cct), cct, source, weight,
+                              int(usable.sum()), level_sigma, detail=detail,
+                              scene_reading=(level, sigma, config.exposure_sigma))
 
 
 def known_illuminant(frames_srgb: list[np.ndarray], config: IlluminantConfig,
