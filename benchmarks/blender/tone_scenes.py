@@ -199,6 +199,7 @@ def _side(azimuth):
 
 def _box(scene, camera, obj):
     """(left, top, right, bottom) of ``obj`` in the image, as fractions (top = 0)."""
+    bpy.context.view_layer.update()  # matrix_world holds the new object's scale only after an update
     corners = [world_to_camera_view(scene, camera, obj.matrix_world @ v.co) for v in obj.data.vertices]
     xs, ys = [c.x for c in corners], [1.0 - c.y for c in corners]
     return [min(xs), min(ys), max(xs), max(ys)]
