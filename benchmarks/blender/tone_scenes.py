@@ -14,7 +14,8 @@ subsurface), an 85 mm lens at 1.1 m, 512 x 512. Beyond it: walls from dark to pa
 distances, coloured environments, a grey card (18 %) or a ColorChecker held beside the face, facing the camera.
 
 Variants: ``plain``; ``card``: an 18 % grey card, 9 cm square, beside the face facing the camera; ``checker``: a
-ColorChecker Classic (11 x 7.6 cm, the passport's size; texture from ``OUT/checker.png``, made by tone_truth.py);
+ColorChecker Classic (11 x 7.6 cm, the passport's size; texture from ``OUT/checker.png``, made by tone_truth.py)
+where the card is, beside the cheek facing the camera;
 ``white``: the face's albedo a uniform 80 % with no specular (the key light's true white level on the face).
 """
 
@@ -185,8 +186,8 @@ def build(scene, settings, centre, variant, out):
                      diffuse_material("card", (0.18, 0.18, 0.18)))
         return _box(scene, camera, card)
     if variant == "checker":
-        checker = plane("checker", (0.11, 0.076), (centre.x + 0.15 * _side(azimuth), centre.y - 0.03,
-                                                   centre.z - 0.13),
+        checker = plane("checker", (0.11, 0.076), (centre.x + 0.16 * _side(azimuth), centre.y - 0.02,
+                                                   centre.z - 0.04),
                         diffuse_material("checker", None, out / "checker.png"))
         return _box(scene, camera, checker)
     return None

@@ -35,7 +35,7 @@ from deface.models.registry import load_face_model
 from deface.priors.checker import CheckerUnavailable, checker_illuminant, find_checker
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
-from deface.priors.illuminant import estimate_illuminant, known_illuminant
+from deface.priors.illuminant import CARD_SOURCES, estimate_illuminant, known_illuminant
 from deface.runtime import keep_freed_memory
 
 
@@ -140,9 +140,11 @@ def _log_tone(context: StageContext, finished: FinishedTextures, log: FitLog) ->
         log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f} (white level {where})")
         return
     darker, lighter = tone["ita_interval"]
-    log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
-             f"level's one-sigma spread ({illuminant.source}); a grey card in the photo "
-             "(tone.illuminant.reference_box) or the light's white level (tone.illuminant.white) narrows it")
+    text = (f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
+            f"level's one-sigma spread ({illuminant.source})")
+    if illuminant.source not in CARD_SOURCES:
+        text += "; a grey card in the photo (--card) or the light's white level (--white) narrows it"
+    log.info(text)
 
 
 @torch.no_grad()

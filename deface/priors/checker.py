@@ -134,4 +134,5 @@ def checker_illuminant(reading: CheckerReading, config: IlluminantConfig) -> Ill
     """The white level a found chart gives (not yet corrected for how it faces: deface/fit/scene_light.py)."""
     box = ",".join(f"{v:.2f}" for v in reading.box)
     return IlluminantEstimate(reading.white, cct_of(reading.white, config), "colour checker", 1.0, 0,
-                              detail=f"a colour checker at {box} ({reading.greys_used} grey patches)")
+                              config.reference_sigma, detail=f"a colour checker at {box} ({reading.greys_used} grey "
+                                                             "patches)")

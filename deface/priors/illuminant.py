@@ -111,6 +111,12 @@ class IlluminantConfig:
     reference_reflectance: float = 0.18
     """Reflectance of the reference surface: 0.18 for a photographic grey card, about 0.9 for white paper
     (``deface fit --card-reflectance``)."""
+    reference_sigma: float = 0.15
+    """Log spread of a card's or colour checker's level once corrected for how it faces: what is left of where it
+    was held (a little below or beside the face, a little nearer or farther from the light) and of the face's
+    lights that correct it. On the truth set's tune renders (benchmarks/tone_truth.py, studio and tungsten) the
+    corrected card's level lies 0.06-0.2 below the key light's on the face (0.43 where the photo clipped the face),
+    RMS 0.15. It sets the tone's interval for a card as ``level_sigma`` does for an estimate."""
     reference_facing: Literal["camera", "light"] = "camera"
     """How the card (or colour checker) was held. "camera": beside the face, facing the camera, as people hold
     one: it then receives the light a surface facing the camera gets, less than the skin facing the key light
@@ -143,6 +149,8 @@ class IlluminantConfig:
             if self.white is not None:
                 raise ValueError("give the white level (--white, tone.illuminant.white) or a card (--card, "
                                  "tone.illuminant.reference_box), not both")
+        if not 0.0 <= self.reference_sigma <= 2.0:
+            raise ValueError(f"tone.illuminant.reference_sigma must be in [0, 2], got {self.reference_sigma}")
         if not 0.0 < self.reference_reflectance <= 1.0:
             raise ValueError("tone.illuminant.reference_reflectance must be in (0, 1], "
                              f"got {self.reference_reflectance}")
@@ -237,7 +245,8 @@ def known_illuminant(frames_srgb: list[np.ndarray], config: IlluminantConfig,
                          "card that is neither, or expose the photo so the card is not blown out")
     white = np.median(linear[usable], axis=0).astype(np.float64) / config.reference_reflectance
     detail = f"a card of {100 * config.reference_reflectance:.0f} % reflectance at {shown}"
-    return IlluminantEstimate(white, cct_of(white, config), "reference card", 1.0, int(usable.sum()), detail=detail)
+    return IlluminantEstimate(white, cct_of(white, config), "reference card", 1.0, int(usable.sum()),
+                              config.reference_sigma, detail=detail)
 
 
 def _fractions(box: tuple[float, float, float, float], shape: tuple[int, ...],
