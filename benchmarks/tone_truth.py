@@ -147,8 +147,9 @@ def _write_tsv(path: Path, rows: list[dict]) -> None:
         writer.writerows(rows)
 
 
-def start_of(path: str, settings: tuple[str, ...], resolution: int) -> tuple[float, dict]:
-    """The tone a fit starts from and its illuminant record (deface's prepare: stage 1, h, the scene's light)."""
+def start_of(path: str, settings: tuple[str, ...], resolution: int) -> tuple[float, dict, dict]:
+    """The tone a fit starts from, its illuminant record and the start's T^0 tone with its one- and two-sigma
+    intervals (deface's prepare: stage 1, h, the scene's light; stage 2 keeps the start in the default preset)."""
     import torch
 
     from deface.fit import pipeline, presets
@@ -162,8 +163,13 @@ def start_of(path: str, settings: tuple[str, ...], resolution: int) -> tuple[flo
     for assignment in settings:
         config = set_from_text(config, assignment)
     work, landmarks, scale, _ = pipeline.detect([load_image(path)], config, path, False)
+    from deface.models.ita import texture_tone
+
     context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=FitLog(quiet=True))
-    return float(context.scene.tone.detach()), context.inputs.scene_light.illuminant.record()
+    illuminant = context.inputs.scene_light.illuminant
+    with torch.no_grad():
+        tone = texture_tone(context.albedo_textures(128).diffuse.numpy(), illuminant.level_sigma)
+    return float(context.scene.tone.detach()), illuminant.record(), tone
 
 
 def starts(out: Path, split: str | None, variant: str, resolution: int, extra: list[str], jobs: int) -> None:
@@ -174,8 +180,13 @@ def starts(out: Path, split: str | None, variant: str, resolution: int, extra: l
         results = list(pool.map(start_of, [str(out / "images" / r["file"]) for r in rows], settings,
                                 [resolution] * len(rows)))
     groups: dict[str, list[float]] = {}
-    level_errors = []
-    for row, (start, illuminant) in zip(rows, results, strict=True):
+    level_errors, inside, inside_2, widths = [], [], [], []
+    for row, (start, illuminant, tone) in zip(rows, results, strict=True):
+        truth = float(row["gt_ita"])
+        (low, high), (low_2, high_2) = tone["ita_interval"], tone["ita_interval_2sigma"]
+        inside.append(low <= truth <= high)
+        inside_2.append(low_2 <= truth <= high_2)
+        widths.append(high - low)
         error = start - float(row["gt_ita"])
         white = float(np.asarray(illuminant["white"]) @ LUMINANCE)
         level_error = float(np.log(white / float(row["true_white"])))
@@ -190,6 +201,8 @@ def starts(out: Path, split: str | None, variant: str, resolution: int, extra: l
               f"max {max(map(abs, errors)):4.1f}  ({len(errors)})")
     print(f"white level: mean log error {statistics.mean(level_errors):+.3f}, spread "
           f"{statistics.pstdev(level_errors):.3f}")
+    print(f"truth inside the start's one-sigma interval {100 * statistics.mean(inside):.0f} %, two-sigma "
+          f"{100 * statistics.mean(inside_2):.0f} %; median one-sigma width {statistics.median(widths):.1f}")
 
 
 def main() -> None:

@@ -112,6 +112,22 @@ def test_manifest_errors_are_one_line(tmp_path):
         read_manifest(tmp_path)
 
 
+def test_a_manifest_gives_each_photo_its_own_settings(tmp_path):
+    """A card's box per photo (benchmarks/tone_truth.py writes them), ``;``-separated; none where the column is
+    empty or absent."""
+    (tmp_path / "images").mkdir()
+    for name in ("a.png", "b.png"):
+        (tmp_path / "images" / name).write_bytes(b"")
+    (tmp_path / "MANIFEST.tsv").write_text("file\ttone_group\tgt_ita\tsettings\n"
+                                           "a.png\tdark\t-10\ttone.illuminant.reference_box=0.7,0.5,0.9,0.7; "
+                                           "tone.illuminant.reference_reflectance=0.9\n"
+                                           "b.png\tlight\t50\t\n")
+    first, second = read_manifest(tmp_path)
+    assert first.settings == ("tone.illuminant.reference_box=0.7,0.5,0.9,0.7",
+                              "tone.illuminant.reference_reflectance=0.9")
+    assert second.settings == () and second.gt_ita == 50.0
+
+
 def test_summary_figures_follow_their_definitions():
     photos = [TonePhoto(f"{g}{i}.png", g, ita) for g, itas in
               (("dark", (-20.0, 0.0)), ("medium", (20.0, 30.0)), ("light", (50.0, 60.0))) for i, ita in enumerate(itas)]
