@@ -16,11 +16,12 @@ ColorChecker held beside the face. Scenes alternate between a ``tune`` part (cho
 ``make`` exposes each scene-linear render three ways: ``manual`` (exposure 1: the scene's light strength decides
 how bright the photo is), ``average`` (the frame's mean luminance at 18 %, as an averaging meter sets it) and
 ``centre`` (the same with the central circle, a fifth of the frame's width in radius, given 75 % of the weight),
-and writes ``OUT/sets/<split>-<variant>/`` for ``deface bench skin-tone`` (MANIFEST.tsv with ``gt_ita``, and a
-``settings`` column giving a card's box). ``true_white``: the luminance a white surface facing the key light shows
-in that exposure, read from the scene's ``white`` render (80 % albedo, no specular: the 90th percentile over the
-face's centre, over 0.8); the level the fit should hold its key light to. ``starts`` prints the tone each render's
-fit starts from (no fit: seconds per image; stage 2 keeps the start in the default preset) against the truth, per
+and writes ``OUT/sets/<split>-<variant>[-manual]/`` for ``deface bench skin-tone`` (MANIFEST.tsv with ``gt_ita``,
+and a ``settings`` column giving a card's box; ``-manual``: the manual exposures alone, a third of the fits).
+``true_white``: the luminance a white surface facing the key light shows in that exposure, read from the scene's
+``white`` render (80 % albedo, no specular: the 90th percentile over the face's centre, over 0.8); the level the fit
+should hold its key light to. ``starts`` prints the tone each render's fit starts from (no fit: seconds per image;
+stage 2 keeps the start in the default preset) against the truth, per
 scene and exposure, and the estimated white level against ``true_white``.
 """
 
@@ -32,6 +33,7 @@ import json
 import os
 import statistics
 from concurrent.futures import ProcessPoolExecutor
+from itertools import product
 from pathlib import Path
 
 import numpy as np
@@ -125,11 +127,13 @@ def make(out: Path) -> None:
                          if meta["variant"] == "card" else ""})
     _write_tsv(out / "MANIFEST.tsv", rows)
     for split in ("tune", "report"):
-        for variant in ("plain", "card", "checker"):
-            chosen = [r for r in rows if r["split"] == split and r["variant"] == variant]
+        for variant, exposure_mode in product(("plain", "card", "checker"), (None, "manual")):
+            chosen = [r for r in rows if r["split"] == split and r["variant"] == variant
+                      and exposure_mode in (None, r["exposure"])]
             if not chosen:
                 continue
-            folder = out / "sets" / f"{split}-{variant}"
+            folder = out / "sets" / f"{split}-{variant}" if exposure_mode is None else \
+                out / "sets" / f"{split}-{variant}-{exposure_mode}"
             (folder / "images").mkdir(parents=True, exist_ok=True)
             for row in chosen:
                 link = folder / "images" / row["file"]
