@@ -251,10 +251,11 @@ def test_the_scenes_reading_is_corrected_before_the_white_point_weighs_in():
     estimate = IlluminantEstimate(combined * planckian_rgb(4000.0), 4000.0, "grey world", 1.0, 100, spread,
                                   scene_reading=(level, sigma, exposure_sigma))
     pixels = photo(skin_albedo(30.0), 0.8 * np.ones(3), hemisphere())
-    corrected = scene_light.facing_illuminant(estimate, pixels, IlluminantConfig(), FitLog(quiet=True))
+    corrected = scene_light.facing_illuminant(estimate, pixels, IlluminantConfig(scene_facing=True),
+                                              FitLog(quiet=True))
     ratio = corrected.orientation
     assert ratio > 1.05
     assert corrected.white == pytest.approx(estimate.white * ratio**0.5, rel=1e-6)  # equal weights: the square root
     assert corrected.level_sigma == estimate.level_sigma
-    off = scene_light.facing_illuminant(estimate, pixels, IlluminantConfig(scene_facing=False), FitLog(quiet=True))
-    assert off is estimate
+    off = scene_light.facing_illuminant(estimate, pixels, IlluminantConfig(), FitLog(quiet=True))
+    assert off is estimate  # off by default (docs/skin-tone.md)
