@@ -108,7 +108,8 @@ class FitOutput:
         (:func:`~deface.models.ita.texture_tone`; no interval without a white level: a preset without the
         scene-light prior, or a fit saved before it)."""
         sigma = (self.illuminant or {}).get("level_sigma")
-        return texture_tone(self.textures.diffuse.detach().numpy(), sigma)
+        return {**texture_tone(self.textures.diffuse.detach().numpy(), sigma),
+                "light_level": (self.illuminant or {}).get("source")}
 
     @property
     def num_frames(self) -> int:

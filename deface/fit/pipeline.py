@@ -35,9 +35,10 @@ from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.ita import texture_tone
 from deface.models.registry import load_face_model
+from deface.priors.checker import CheckerUnavailable, checker_illuminant, find_checker
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
-from deface.priors.illuminant import estimate_illuminant, known_illuminant
+from deface.priors.illuminant import CARD_SOURCES, estimate_illuminant, known_illuminant
 from deface.runtime import keep_freed_memory
 from deface.texture.confidence import triangle_density
 
@@ -176,9 +177,11 @@ def _log_tone(context: StageContext, finished: FinishedTextures, log: FitLog) ->
         log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f} (white level {where})")
         return
     darker, lighter = tone["ita_interval"]
-    log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
-             f"level's one-sigma spread ({illuminant.source}); a grey card in the photo "
-             "(tone.illuminant.reference_box) or the light's white level (tone.illuminant.white) narrows it")
+    text = (f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
+            f"level's one-sigma spread ({illuminant.source})")
+    if illuminant.source not in CARD_SOURCES:
+        text += "; a grey card in the photo (--card) or the light's white level (--white) narrows it"
+    log.info(text)
 
 
 @torch.no_grad()
@@ -221,8 +224,9 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     classifier, note = _face_classifier(face, target, config, models_dir, log)
     scene_light = None
     if config.tone.scene_light_prior:
-        illuminant = _scene_illuminant(face, target, config)
-        log.info(f"scene illuminant: {illuminant.source}, white level "
+        illuminant = _scene_illuminant(face, target, config, log)
+        where = f" ({illuminant.detail})" if illuminant.detail else ""
+        log.info(f"scene illuminant: {illuminant.source}{where}, white level "
                  f"{np.round(illuminant.white, 3).tolist()}, {illuminant.cct:.0f} K")
         scene_light = start_from_scene(face, target.frames_srgb, classifier, illuminant, config, log)
     elif config.tone.illuminant.white is not None or config.tone.illuminant.reference_box is not None:
@@ -266,15 +270,39 @@ def _face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, mode
 
 
 @torch.no_grad()
-def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig):
-    """The white level the user gives (or points a reference card at), else the estimate from every frame's
-    pixels outside the stage-1 face: the whole frames, not only the crop around the face."""
+def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig, log: FitLog):
+    """The white level the user gives (or points a reference card at), else a colour checker's in the photo,
+    else the estimate from every frame's pixels outside the stage-1 face: the whole frames, not only the crop
+    around the face."""
     scene = target.scene_frames()
-    known = known_illuminant(scene, config.tone.illuminant)
+    known = known_illuminant(scene, config.tone.illuminant, target.scale)
     if known is not None:
         return known
+    checker = _checker_illuminant(scene[0], config.tone.illuminant, log)
+    if checker is not None:
+        return checker
     faces = [_scene_face(face, target, frame) for frame in range(target.num_frames)]
     return estimate_illuminant(scene, faces, config.tone.illuminant)
+
+
+def _checker_illuminant(photo: np.ndarray, settings, log: FitLog):
+    """W from a colour checker in ``photo`` (the first frame, whole; ``tone.illuminant.checker``), or None, said
+    in the log; ValueError (one line) when it is required ("on") and unavailable or not found."""
+    if settings.checker == "off":
+        return None
+    try:
+        reading = find_checker(photo)
+    except CheckerUnavailable as error:
+        if settings.checker == "on":
+            raise ValueError(f"tone.illuminant.checker=on: {error}") from None
+        log.info(f"{error}; the light's level is estimated from the scene")
+        return None
+    if reading is None:
+        if settings.checker == "on":
+            raise ValueError("tone.illuminant.checker=on: no colour checker found in the photo (its six grey "
+                             "patches must show, unclipped)")
+        return None
+    return checker_illuminant(reading, settings)
 
 
 def _scene_face(face: PosedFace, target: FitTarget, frame: int) -> np.ndarray:

@@ -106,10 +106,16 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
 def _diffuse_caption(fit: FitOutput) -> str:
     """The diffuse map's caption: its skin tone, and the range the unknown light level leaves open."""
     tone = fit.skin_tone()
+    illuminant = fit.illuminant or {}
+    source = illuminant.get("detail") or illuminant.get("source")
+    where = f"; light level from {source}" if source else ""
     if tone["ita_interval"] is None:
-        return f"diffuse (skin ITA {tone['texture_ita']:.0f})"
+        return f"diffuse (skin ITA {tone['texture_ita']:.0f}{where})"
     darker, lighter = tone["ita_interval"]
-    return f"diffuse (skin ITA {tone['texture_ita']:.0f}; {darker:.0f} to {lighter:.0f} for the light level)"
+    if lighter - darker < 0.5:
+        return f"diffuse (skin ITA {tone['texture_ita']:.0f}{where})"
+    return (f"diffuse (skin ITA {tone['texture_ita']:.0f}; {darker:.0f} to {lighter:.0f} for the light level"
+            f"{where})")
 
 
 def _figure(src: str, caption: str, width: int | None = None) -> str:
