@@ -23,7 +23,6 @@ from deface.fit import fast_stage3, pipeline, presets, stage3
 from deface.fit.config import override
 from deface.fit.log import FitLog
 from deface.fit.stage2 import _stage2_loss
-from deface.fit.target import FitTarget
 from deface.fit.texels import frame_views
 from deface.io.images import load_image
 from deface.paths import shared_dir
@@ -46,8 +45,8 @@ def main() -> None:
     if args.supersampling:
         config = override(config, **{"render.supersampling": args.supersampling})
     log = FitLog(quiet=True)
-    work, landmarks, scale, _ = pipeline.detect([load_image(args.photo)], config, str(args.photo), False)
-    context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=log)
+    target = pipeline.detect_target([load_image(args.photo)], config, str(args.photo), False)
+    context, _ = pipeline.prepare(target, config, log=log)
     _stage2_loss(context, True, True).backward()  # shadow transfer and caches
     step = _stage2_step(context) if args.stage == 2 else _stage3_step(context, args.reference_terms)
     walls, cpus = [], []

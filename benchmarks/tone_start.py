@@ -44,15 +44,14 @@ def start_ita(path: str, resolution: int, preset: str, settings: tuple[str, ...]
     from deface.fit import pipeline, presets
     from deface.fit.config import override, set_from_text
     from deface.fit.log import FitLog
-    from deface.fit.target import FitTarget
     from deface.io.images import load_image
 
     torch.set_num_threads(1)
     config = override(presets.get(preset), resolution=resolution)
     for assignment in settings:
         config = set_from_text(config, assignment)
-    work, landmarks, scale, _ = pipeline.detect([load_image(path)], config, path, False)
-    context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=FitLog(quiet=True))
+    target = pipeline.detect_target([load_image(path)], config, path, False)
+    context, _ = pipeline.prepare(target, config, log=FitLog(quiet=True))
     return float(context.scene.tone.detach())
 
 

@@ -22,16 +22,18 @@ def levels(path: str) -> tuple[float | None, float | None, float, float]:
     import torch
 
     from deface.fit import pipeline, presets
+    from deface.fit.config import override
     from deface.io.images import LUMINANCE, load_image, srgb_to_linear
     from deface.priors import illuminant
 
     torch.set_num_threads(1)
-    config = presets.get("default")
+    # the whole photo at 256 px, as the illuminant estimate read it before the fit cropped to the face (issue 39)
+    config = override(presets.get("default"), resolution=256, **{"crop.enabled": False})
     settings = config.tone.illuminant
-    work, landmarks, _, _ = pipeline.detect([load_image(path)], config, path, False)
-    frame = np.asarray(work[0])
+    target = pipeline.detect_target([load_image(path)], config, path, False)
+    frame = np.asarray(target.frames_srgb[0])
     face = np.zeros(frame.shape[:2], np.uint8)
-    cv2.fillConvexPoly(face, cv2.convexHull(landmarks[0].points.astype(np.int32)), 1)
+    cv2.fillConvexPoly(face, cv2.convexHull(target.landmarks[0].points.astype(np.int32)), 1)
     pixels = illuminant._scene_pixels(frame, face.astype(bool), settings)
     linear = srgb_to_linear(pixels)
     luminance = linear @ LUMINANCE

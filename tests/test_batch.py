@@ -105,7 +105,16 @@ def test_status_counts_the_done_inputs_tones_by_category_and_how_sure_they_are(t
                                                                                                               19.0]}))
     lines = summarise(read_records(tmp_path)).tones  # c's last fit (tan, sure) replaces its first
     assert lines[0].endswith("very light 1, light 1, intermediate 1, tan 1, brown 0, dark 1")
-    assert lines[1].startswith("3 of 4 within 20 degrees") and "median interval 14" in lines[1]
+    assert lines[1].startswith("3 of 4 within 20 degrees") and "median 14" in lines[1] and len(lines) == 2
+    append_record(tmp_path, replace(_record("g.jpg", "done"), skin_tone={
+        "texture_ita": 40.0, "ita_interval": [38.0, 42.0], "ita_interval_2sigma": [36.0, 44.0],
+        "light_level": "reference card"}))
+    append_record(tmp_path, replace(_record("h.jpg", "done"), skin_tone={
+        "texture_ita": 20.0, "ita_interval": [5.0, 32.0], "ita_interval_2sigma": [-8.0, 45.0],
+        "light_level": "grey world"}))
+    lines = summarise(read_records(tmp_path)).tones
+    assert "two-sigma median 30" in lines[1]  # (8 + 53) / 2 = 30.5 over the two that record it
+    assert lines[2] == "light level from: reference card 1, grey world 1"
     assert summarise([_record("a.jpg", "done")]).tones == []  # records written before the tone was recorded
     assert tone_text({"texture_ita": 41.6, "ita_interval": [30.2, 50.7]}) == ", skin ITA 42 (30 to 51)"
     assert tone_text({"texture_ita": 41.6, "ita_interval": [41.6, 41.6]}) == ", skin ITA 42"  # a known light

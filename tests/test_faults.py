@@ -401,8 +401,8 @@ def test_clip_whose_middle_frames_have_no_face_keeps_the_others(tmp_path, face_f
     clip = _clip(tmp_path / "gap.mp4", [face_frame, blank, blank, face_frame])
     config = override(presets.get("fast"), max_frames=4, resolution=64)
     frames, indices = task.load_frames(InputItem(clip, "video"), config)
-    work, landmarks, _scale, kept = detect(frames, config, str(clip), video=True)
-    assert indices == [0, 1, 2, 3] and kept == [0, 3] and len(work) == len(landmarks) == 2
+    landmarks, kept = detect(frames, config, str(clip), video=True)
+    assert indices == [0, 1, 2, 3] and kept == [0, 3] and len(landmarks) == 2
 
 
 def test_one_frame_clip_is_one_frame(tmp_path, face_frame):
@@ -413,7 +413,7 @@ def test_one_frame_clip_is_one_frame(tmp_path, face_frame):
     config = override(presets.get("fast"), resolution=64)
     frames, indices = task.load_frames(InputItem(clip, "video"), config)
     assert indices == [0] and len(frames) == 1
-    assert detect(frames, config, str(clip), video=True)[3] == [0]
+    assert detect(frames, config, str(clip), video=True)[1] == [0]
 
 
 def test_clip_without_any_face_fails_in_one_line(tmp_path, face_frame):

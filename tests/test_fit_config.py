@@ -101,8 +101,8 @@ def test_set_parses_by_the_fields_type():
     ("tone.ita_range=1,2,3", "tone.ita_range takes 2 comma-separated values"),
     ("resolution=none", "resolution must be an integer"),
     ("tone.illuminant.white=1,0,1", "tone.illuminant.white must be positive"),
-    ("tone.illuminant.reference_box=0.5,0,0.4,1", "left,top,right,bottom as fractions"),
-    ("tone.illuminant.reference_box=0,0,2,1", "left,top,right,bottom as fractions"),
+    ("tone.illuminant.reference_box=0.5,0,0.4,1", "left,top,right,bottom, as fractions"),
+    ("tone.illuminant.reference_box=-0.1,0,0.5,1", "left,top,right,bottom, as fractions"),
     ("tone.illuminant.reference_reflectance=0", "reference_reflectance must be in (0, 1]"),
 ])
 def test_set_errors_are_one_line(assignment, message):

@@ -104,7 +104,8 @@ def test_fit_command_writes_all_outputs(photos, tmp_path):
     assert not list(tmp_path.glob(".*partial"))  # no staging folder left behind
     # The batch record carries the texture's tone as params.json has it, and `deface batch status` counts it.
     tone = params["skin_tone"]
-    assert [r.skin_tone for r in read_records(tmp_path)] == [{k: tone[k] for k in ("texture_ita", "ita_interval")}]
+    keys = ("texture_ita", "ita_interval", "ita_interval_2sigma", "light_level")
+    assert [r.skin_tone for r in read_records(tmp_path)] == [{k: tone[k] for k in keys}]
     status = CliRunner().invoke(app, ["batch", "status", str(tmp_path)])
     assert f"{ita_group(tone['texture_ita'])} 1" in status.output and "skin tones of 1 fit(s)" in status.output
     # A second run skips the finished input instead of redoing or destroying it.

@@ -5,6 +5,8 @@ white turban classified as skin. Each must leave the estimate where the clean sk
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 from skimage.color import lab2rgb
@@ -13,7 +15,7 @@ from deface.fit import scene_light
 from deface.fit.scene_light import SKIN_F0, SkinPixels, lit_skin_albedo
 from deface.io.images import linear_to_srgb, srgb_to_linear
 from deface.models.ita import ita_of_srgb
-from deface.priors.illuminant import planckian_rgb
+from deface.priors.illuminant import IlluminantConfig, planckian_rgb
 
 KEY = np.array([0.45, 0.35, 0.82]) / np.linalg.norm([0.45, 0.35, 0.82])
 AMBIENT = 0.25
@@ -191,3 +193,69 @@ def test_red_clipped_on_all_the_lit_skin_takes_the_colour_from_the_rest():
     assert (over.srgb[lit, 0] >= 0.98).mean() > 0.99
     ratio = lit_skin_albedo(over, white) / albedo
     assert ratio == pytest.approx(np.full(3, ratio.mean()), rel=0.05)  # the colour, in every channel alike
+
+
+def card_facing_camera_ratio(normals: np.ndarray) -> float:
+    """The truth of ``facing_camera_ratio`` for ``photo``'s light: the light's white response at the key quantile
+    of the skin's normals over its response at the camera's direction (+z), where a card facing the camera is."""
+    shading = AMBIENT + (1 - AMBIENT) * np.clip(normals @ KEY, 0, None)
+    return float(np.quantile(shading, scene_light.KEY_QUANTILE) / (AMBIENT + (1 - AMBIENT) * KEY[2]))
+
+
+@pytest.mark.parametrize("ita", [-30.0, 10.0, 50.0])
+def test_a_card_facing_the_camera_is_corrected_to_the_light_facing_the_key(ita):
+    """A card beside the face, facing the camera, gets less of a key light 35 degrees off the camera than the skin
+    facing it; the ratio comes from the face's own shading, whatever the skin's tone (within 4 %)."""
+    normals = hemisphere()
+    truth = card_facing_camera_ratio(normals)
+    assert truth > 1.05  # the key light is well off the camera
+    ratio = scene_light.facing_camera_ratio(photo(skin_albedo(ita), 0.8 * np.ones(3), normals), np.ones(3))
+    assert ratio == pytest.approx(truth, rel=0.04)
+
+
+def test_a_key_light_at_the_camera_needs_almost_no_card_correction(monkeypatch):
+    """The card then gets the light's peak, a little above W, which is the light at the skin's key quantile."""
+    monkeypatch.setattr(sys.modules[__name__], "KEY", np.array([0.0, 0.0, 1.0]))
+    normals = hemisphere()
+    ratio = scene_light.facing_camera_ratio(photo(skin_albedo(30.0), 0.8 * np.ones(3), normals), np.ones(3))
+    assert ratio == pytest.approx(card_facing_camera_ratio(normals), rel=0.03)
+    assert 0.9 < ratio <= 1.0
+
+
+def test_the_card_correction_scales_w_and_says_so():
+    from deface.fit.log import FitLog
+    from deface.priors.illuminant import IlluminantEstimate
+
+    card = IlluminantEstimate(np.array([0.5, 0.5, 0.5]), 6504.0, "reference card", 1.0, 100, detail="a card")
+    pixels, log = photo(skin_albedo(30.0), 0.8 * np.ones(3), hemisphere()), FitLog(quiet=True)
+    corrected = scene_light.facing_illuminant(card, pixels, IlluminantConfig(), log)
+    ratio = corrected.orientation
+    assert ratio > 1.05 and corrected.white == pytest.approx(card.white * ratio)
+    assert corrected.record()["orientation"] == pytest.approx(ratio, abs=1e-4)
+    assert "facing the camera" in corrected.detail
+    assert any("facing the camera" in note for note in log.notes)
+    towards_light = IlluminantConfig(reference_facing="light")
+    assert scene_light.facing_illuminant(card, pixels, towards_light, log) is card  # held towards the light: as read
+    given = IlluminantEstimate(np.ones(3), 6504.0, "given", 1.0, 0)
+    assert scene_light.facing_illuminant(given, pixels, IlluminantConfig(), log) is given
+
+
+def test_the_scenes_reading_is_corrected_before_the_white_point_weighs_in():
+    """A grey world's level (surfaces facing the camera) is corrected like a card's, then combined with the photo's
+    white point by the same inverse variances as before: the correction's share of W is the scene's weight."""
+    from deface.fit.log import FitLog
+    from deface.priors.illuminant import IlluminantEstimate, _with_exposure_prior
+
+    level, sigma, exposure_sigma = 0.6, 0.7, 0.7
+    combined, spread = _with_exposure_prior(level, sigma, exposure_sigma)
+    estimate = IlluminantEstimate(combined * planckian_rgb(4000.0), 4000.0, "grey world", 1.0, 100, spread,
+                                  scene_reading=(level, sigma, exposure_sigma))
+    pixels = photo(skin_albedo(30.0), 0.8 * np.ones(3), hemisphere())
+    corrected = scene_light.facing_illuminant(estimate, pixels, IlluminantConfig(scene_facing=True),
+                                              FitLog(quiet=True))
+    ratio = corrected.orientation
+    assert ratio > 1.05
+    assert corrected.white == pytest.approx(estimate.white * ratio**0.5, rel=1e-6)  # equal weights: the square root
+    assert corrected.level_sigma == estimate.level_sigma
+    off = scene_light.facing_illuminant(estimate, pixels, IlluminantConfig(), FitLog(quiet=True))
+    assert off is estimate  # off by default (docs/skin-tone.md)

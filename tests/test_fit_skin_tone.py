@@ -20,7 +20,7 @@ from deface.fit.pipeline import run_stages
 from deface.fit.stage2 import _stage2_loss
 from deface.fit.target import FitTarget
 from deface.io.images import linear_to_srgb
-from deface.losses.illuminant import front_directions, peak_white
+from deface.losses.illuminant import front_directions, peak_white, white_response
 from deface.losses.texture import SmoothDeparture
 from deface.models import load_face_model
 from deface.models.ita import texture_ita
@@ -39,11 +39,13 @@ def skin_lab(ita: float, radius: float = 19.0, a_star: float = 13.0) -> np.ndarr
     return np.array([50 + radius * np.sin(angle), a_star, radius * np.cos(angle)])
 
 
-def render_scene(ita: float, cct: float, size: int = 96, shading: np.ndarray | None = None, exposure: float = 1.0):
+def render_scene(ita: float, cct: float, size: int = 96, shading: np.ndarray | None = None, exposure: float = 1.0,
+                 card: float | None = None):
     """sRGB image and exact landmarks of the mean ICT face with a uniform skin of tone ``ita`` (plus the
     prior's region pattern) under a Planckian light of ``cct`` in a grey room, exposed so that a white surface
     facing the light reads ``exposure`` times the white point; ``shading`` [size, size] multiplies the face
-    (shading the lights cannot draw)."""
+    (shading the lights cannot draw). ``card``: a card of that reflectance over the image's left seventh (the
+    room's wall elsewhere), facing the camera, so lit by the light's response at the camera's direction."""
     model = load_face_model("ict")
     renderer = Renderer(RenderConfig(shadow_rays=48))
     face = Mesh.create(model.mean_shape, model.triangles, model.uvs, model.triangle_uvs)
@@ -64,6 +66,9 @@ def render_scene(ita: float, cct: float, size: int = 96, shading: np.ndarray | N
     coverage = output.mask.numpy()[..., None]
     face_image = output.images[0].numpy() * (1.0 if shading is None else shading[..., None])
     image = (face_image * coverage + WALL * white * (1 - coverage)) * exposure
+    if card is not None:
+        facing = white_response(light, torch.tensor([[0.0, 0.0, 1.0]]))[0, 0].numpy()
+        image[:, : size // 7] = card * facing * exposure
     return linear_to_srgb(np.clip(image, 0, 1)), true_landmarks(model, face, camera)
 
 
@@ -174,7 +179,8 @@ def test_a_reference_card_fixes_the_exposure_the_scene_cannot_tell(shared):
         return float(context.face.scene.tone.detach()), next(n for n in log.notes if "scene illuminant" in n)
 
     estimated, _ = start()
-    wall = {"tone.illuminant.reference_box": (0.0, 0.0, 0.15, 1.0), "tone.illuminant.reference_reflectance": WALL}
+    wall = {"tone.illuminant.reference_box": (0.0, 0.0, 0.15, 1.0), "tone.illuminant.reference_reflectance": WALL,
+            "tone.illuminant.reference_facing": "light"}  # this room's wall is lit as a surface facing the light
     carded, note = start(**wall)
     assert "reference card" in note and "1.7" in note
     assert abs(carded - 30.0) < 8 and abs(carded - 30.0) < abs(estimated - 30.0) - 5, (carded, estimated)
@@ -182,6 +188,30 @@ def test_a_reference_card_fixes_the_exposure_the_scene_cannot_tell(shared):
     assert "given" in note and given == pytest.approx(carded, abs=1.0)
     brighter, _ = start(**{"tone.illuminant.white": (3.4, 3.4, 3.4)})
     assert brighter < given - 10
+
+
+def test_a_card_beside_the_face_facing_the_camera_is_corrected_for_it(shared):
+    """A card facing the camera gets less of a key light 32 degrees off the camera than a surface facing the
+    light; read as it is, it gives a low W and a lighter start. Corrected with the face's own key light, it gives
+    the start that the light's W given gives (within a degree and a half)."""
+    from deface.fit.pipeline import prepare
+
+    image, landmarks = render_scene(30.0, 6504.0, exposure=1.7, card=0.18)
+    target = FitTarget([image], [landmarks], 1.0)
+    card = {"tone.illuminant.reference_box": (0.0, 0.0, 0.12, 1.0)}
+
+    def start(**settings):
+        log = FitLog(quiet=True)
+        context, _ = prepare(target, override(presets.get("deface"), **SHORT, **{**card, **settings}), log=log)
+        return float(context.face.scene.tone.detach()), context.inputs.scene_light.illuminant, log.notes
+
+    corrected, illuminant, notes = start()
+    as_read, read, _ = start(**{"tone.illuminant.reference_facing": "light"})
+    assert illuminant.orientation > 1.05 and illuminant.white == pytest.approx(read.white * illuminant.orientation)
+    assert any("facing the camera" in note for note in notes)
+    given, _, _ = start(**{"tone.illuminant.reference_box": None, "tone.illuminant.white": (1.7, 1.7, 1.7)})
+    assert abs(corrected - given) < 1.5, (corrected, given)
+    assert abs(as_read - given) > abs(corrected - given) + 2, (as_read, given)
 
 
 def test_a_white_level_a_preset_does_not_use_is_said_so(shared):

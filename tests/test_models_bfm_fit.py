@@ -160,16 +160,16 @@ def test_models_check_reports_the_metadata(bfm_files):
 
 def test_stage1_landmark_error_on_photos(bfm, corr, photos):
     from deface.fit import presets
-    from deface.fit.pipeline import detect
+    from deface.fit.pipeline import detect_target
     from deface.fit.stage1 import fit_landmarks
 
     config = presets.get("default")
     errors = []
     for name in ("000031.jpg", "015270.jpg", "nextface-s1.png"):
         image = np.asarray(Image.open(photos / name).convert("RGB"), np.float32) / 255.0
-        work, landmarks, _, _ = detect([image], config, name, video=False)
-        size = (work[0].shape[1], work[0].shape[0])
-        result = fit_landmarks(bfm, corr, landmarks, size, config.stage1, config.iterations.stage1)
+        target = detect_target([image], config, name, video=False)
+        result = fit_landmarks(bfm, corr, target.landmarks, target.size, config.stage1, config.iterations.stage1,
+                               principal_point=target.principal_point, photo_side=max(target.framing.scene_size))
         errors.append(float(result.error_iod[0]))
     assert max(errors) <= 0.03, errors
 

@@ -112,6 +112,22 @@ def test_manifest_errors_are_one_line(tmp_path):
         read_manifest(tmp_path)
 
 
+def test_a_manifest_gives_each_photo_its_own_settings(tmp_path):
+    """A card's box per photo (benchmarks/tone_truth.py writes them), ``;``-separated; none where the column is
+    empty or absent."""
+    (tmp_path / "images").mkdir()
+    for name in ("a.png", "b.png"):
+        (tmp_path / "images" / name).write_bytes(b"")
+    (tmp_path / "MANIFEST.tsv").write_text("file\ttone_group\tgt_ita\tsettings\n"
+                                           "a.png\tdark\t-10\ttone.illuminant.reference_box=0.7,0.5,0.9,0.7; "
+                                           "tone.illuminant.reference_reflectance=0.9\n"
+                                           "b.png\tlight\t50\t\n")
+    first, second = read_manifest(tmp_path)
+    assert first.settings == ("tone.illuminant.reference_box=0.7,0.5,0.9,0.7",
+                              "tone.illuminant.reference_reflectance=0.9")
+    assert second.settings == () and second.gt_ita == 50.0
+
+
 def test_summary_figures_follow_their_definitions():
     photos = [TonePhoto(f"{g}{i}.png", g, ita) for g, itas in
               (("dark", (-20.0, 0.0)), ("medium", (20.0, 30.0)), ("light", (50.0, 60.0))) for i, ita in enumerate(itas)]
@@ -155,6 +171,7 @@ def test_the_tone_interval_is_the_map_under_a_light_level_one_sigma_off(lab):
     assert texture_tone(diffuse, None)["ita_interval"] is None
     wider = texture_tone(diffuse, 0.8)["ita_interval"]
     assert wider[0] < darker and wider[1] > lighter
+    assert tone["ita_interval_2sigma"] == pytest.approx(wider, abs=1e-6)  # two sigma: the interval of 2 x 0.4
 
 
 def test_a_dark_skins_interval_is_wider_for_the_same_light_level_spread():
@@ -172,6 +189,10 @@ def test_interval_figures_count_the_references_inside():
                "p2": {"albedo_ita": 41.0, "ita_interval": [35.0, 45.0]}}  # inside
     figures = summary(photos, records)
     assert figures["in_interval"] == pytest.approx(2 / 3) and figures["interval_width"] == pytest.approx(40 / 3)
+    assert figures["interval_median_width"] == pytest.approx(10.0) and np.isnan(figures["in_interval_2sigma"])
+    records["p1"]["ita_interval_2sigma"] = [46.0, 68.0]  # the two-sigma interval holds p1's truth
+    records["p0"]["ita_interval_2sigma"] = [-15.0, 25.0]
+    assert summary(photos, records)["in_interval_2sigma"] == pytest.approx(1.0)  # p2's, not recorded, not counted
     without = summary(photos, {k: {"albedo_ita": v["albedo_ita"]} for k, v in records.items()})
     assert np.isnan(without["in_interval"]) and np.isnan(without["interval_width"])
 

@@ -166,7 +166,8 @@ def _pixel_directions_cases():
     cam = Camera(torch.tensor(150.0), torch.tensor([3.0, 0.4, -0.2]), torch.tensor([0.5, -1.0, 40.0]), 120, 90)
     rotation = cam.rotation_matrix.numpy().astype(np.float32)
     # float32 rays: the loop and numpy round differently (the length of a unit direction to 1e-6)
-    return [Case(np.arange(0, 120 * 90, 7), (90, 120), 150.0, rotation, rtol=0, atol=1e-6)]
+    return [Case(np.arange(0, 120 * 90, 7), (90, 120), 150.0, (60.0, 45.0), rotation, rtol=0, atol=1e-6),
+            Case(np.arange(0, 120 * 90, 11), (90, 120), 150.0, (-210.5, 300.25), rotation, rtol=0, atol=1e-6)]
 
 
 CASES = {

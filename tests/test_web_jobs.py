@@ -56,6 +56,8 @@ def test_the_skin_tone_in_words():
     assert "tan (ITA 17°) to very light (59°)" in open_range and "grey card" in open_range
     card = tone_words({"texture_ita": 12.0, "ita_interval": [12.0, 12.0]}, {"source": "reference card"})
     assert "**Skin tone: tan**" in card and "grey card marked in the photo" in card
+    held = tone_words({"texture_ita": 12.0, "ita_interval": [8.0, 16.0]}, {"source": "colour checker"})
+    assert "colour checker found in the photo" in held and "ITA 8° to 16°" in held
     baseline = tone_words({"texture_ita": -40.0, "ita_interval": None}, None)
     assert "**Skin tone: dark**" in baseline and "no range" in baseline
     assert tone_words(None, None) == "Skin tone: not recorded for this fit."

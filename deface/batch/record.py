@@ -42,7 +42,7 @@ class BatchRecord:
     attempt: int = 1  # 2 = the retry after a worker died
     engine: str = "local"  # "inline" (this process), "local" (worker processes) or "ray"
     cpu_seconds: float | None = None  # CPU time of the fitting process during the attempt (load-independent)
-    skin_tone: dict | None = None  # done: {"texture_ita", "ita_interval"} (params.json skin_tone; interval may be None)
+    skin_tone: dict | None = None  # done: params.json skin_tone ({"texture_ita", "ita_interval", ...}; may lack keys)
     finished: str = field(default_factory=lambda: time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
 
     def __post_init__(self) -> None:
@@ -126,9 +126,20 @@ def tone_lines(states: Iterable[BatchRecord]) -> list[str]:
     if not widths:
         return [line]
     sure = sum(width <= SURE_TONE_WIDTH for width in widths)
-    return [line, f"{sure} of {len(widths)} within {SURE_TONE_WIDTH:.0f} degrees for the light level (median "
-                  f"interval {statistics.median(widths):.0f}); the rest: a grey card or a known white level "
-                  "(README) narrows them"]
+    lines = [line, f"{sure} of {len(widths)} within {SURE_TONE_WIDTH:.0f} degrees for the light level (one-sigma "
+                   f"interval, median {statistics.median(widths):.0f}){_two_sigma(tones)}; the rest: a grey card "
+                   "(--card), a colour checker or a known white level (--white) narrows them"]
+    sources = [tone["light_level"] for tone in tones if tone.get("light_level")]
+    if sources:
+        lines.append("light level from: " + ", ".join(f"{name} {sources.count(name)}"
+                                                      for name in sorted(set(sources), key=sources.index)))
+    return lines
+
+
+def _two_sigma(tones: list[dict]) -> str:
+    """", two-sigma median 31" over the tones that record it ("" before they did)."""
+    widths = [t["ita_interval_2sigma"][1] - t["ita_interval_2sigma"][0] for t in tones if t.get("ita_interval_2sigma")]
+    return f", two-sigma median {statistics.median(widths):.0f}" if widths else ""
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from deface.fit.config import FitConfig
 from deface.fit.guard import NonFiniteError
 from deface.fit.log import FitLog
 from deface.fit.pipeline import fit
-from deface.io.images import LOAD_MAX_SIDE, InputError, load_image, one_line
+from deface.io.images import LOAD_MAX_SIDE, InputError, image_size, load_image, one_line
 from deface.io.inputs import InputItem
 from deface.io.video import read_spread_frames
 from deface.landmarks.detect import NoFaceError
@@ -107,6 +107,8 @@ def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
     result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log)
     record = {"path": str(item.path), "kind": item.kind, "frames": indices,
               "size": [int(frames[0].shape[1]), int(frames[0].shape[0])]}
+    if item.kind == "image":  # a photo above LOAD_MAX_SIDE was decoded smaller: params.json's camera says both
+        record["file_size"] = list(image_size(item.path))
     try:
         write_fit(result, folder, record)
     except OSError as error:

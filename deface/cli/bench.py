@@ -134,7 +134,8 @@ def sheet_command(
 
 
 def skin_tone_command(
-    folder: Annotated[Path, typer.Argument(help="Folder with images/ and MANIFEST.tsv (file, tone_group[, gt_ita]).")],
+    folder: Annotated[Path, typer.Argument(help="Folder with images/ and MANIFEST.tsv (file, tone_group[, gt_ita][, "
+                                                "settings: a photo's own PATH=VALUE;...]).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Results folder (fits cached per photo).")],
     preset: Annotated[str, typer.Option(help="The preset measured.")] = "default",
     baseline: Annotated[bool, typer.Option("--baseline/--no-baseline", help="Also fit NextFace.")] = True,

@@ -50,6 +50,11 @@ def fit_command(
     frame_stride: options.FrameStride = None,
     face_index: options.FaceIndex = None,
     threads: options.Threads = None,
+    card: options.Card = None,
+    card_reflectance: options.CardReflectance = None,
+    card_facing: options.CardFacing = None,
+    white: options.White = None,
+    checker: options.Checker = None,
     overwrite: Annotated[bool, typer.Option(help="Redo inputs whose outputs already exist (default: skip them).")]
     = False,
     quiet: Annotated[bool, typer.Option(help="Only errors and a summary.")] = False,
@@ -78,7 +83,8 @@ def fit_command(
             preset, config_file, sets, model=model, seed=seed, lights=lights, bands=bands, light_masks=light_masks,
             face_region=face_region, priors=priors, resolution=resolution, texture_size=texture_size,
             iterations=iterations, max_frames=max_frames, frame_stride=frame_stride, face_index=face_index,
-            threads=threads,
+            threads=threads, card=card, card_reflectance=card_reflectance, card_facing=card_facing, white=white,
+            checker=checker,
         )
         items = list_inputs(inputs)
         batch = _batch_options(jobs, engine, ray_address, ray_outputs, overwrite, retry_failed, quiet, verbose)

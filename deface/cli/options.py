@@ -45,7 +45,7 @@ class Range:
 # Working image: below 32 px the face has too few pixels for the fields; above 2048 px one fit needs
 # several GB and hours. Lights and bands: each light adds a render per step, each band 2B+1 coefficients.
 RANGES = {
-    "--resolution": Range(32, 2048, "a number of pixels (longest side of the working image)"),
+    "--resolution": Range(32, 2048, "a number of pixels (the working image's longest side at most)"),
     "--texture-size": Range(16, 4096, "a number of texels (side of the UV maps)"),
     "--lights": Range(1, 16, "a number of light conditions"),
     "--bands": Range(1, 16, "a number of SH bands"),
@@ -135,11 +135,13 @@ FaceRegion = Annotated[bool | None, typer.Option("--face-region/--no-face-region
                                                       "decouple.face_region]")]
 Priors = Annotated[str | None, typer.Option(help="Ablation: priors to use, comma list of gp,lp,hp or none. "
                                                  "(config: priors.global_prior, local_prior, human_prior)")]
-Resolution = Annotated[int | None, typer.Option(help="Working resolution (longest side, 32-2048 px). "
-                                                     "(config: resolution)")]
-TextureSize = Annotated[int | None, typer.Option("--texture-size", help="UV texture side (16-4096 texels; the "
-                                                                     "preset's default is 512). (config: "
-                                                                     "texture_size)")]
+Resolution = Annotated[int | None, typer.Option(help="Cap on the working image's longest side (32-2048 px; the "
+                                                     "image is the crop around the face at the photo's own "
+                                                     "scale, never upsampled; default 512; a clip: also "
+                                                     "clip_resolution, 256). (config: resolution)")]
+TextureSize = Annotated[int | None, typer.Option("--texture-size", help="UV texture side (16-4096 texels; default: "
+                                                                     "what the face's pixels support, 512-1024). "
+                                                                     "(config: texture_size)")]
 Iterations = Annotated[str | None, typer.Option(help="Iterations per stage as S1,S2,S3 (e.g. 300,400,200). "
                                                      "(config: iterations.stage1, stage2, stage3)")]
 MaxFrames = Annotated[int | None, typer.Option(help="Video: number of frames used (evenly spread). "
@@ -150,6 +152,27 @@ FaceIndex = Annotated[int | None, typer.Option(help="Which face when several (0 
                                                     "face_index]")]
 Threads = Annotated[int | None, typer.Option(help="Torch threads (default 1: bit-exact results per seed). "
                                                   "(config: threads)")]
+
+Card = Annotated[str | None, typer.Option(
+    "--card", metavar="X0,Y0,X1,Y1",
+    help="A grey card (or white paper, --card-reflectance) in the photo: its box, left,top,right,bottom, as "
+         "fractions of the image or as pixels. Its reading sets the light's level, corrected for facing the camera "
+         "(hold it beside the face: docs/skin-tone.md). (config: tone.illuminant.reference_box)")]
+CardReflectance = Annotated[float | None, typer.Option(
+    "--card-reflectance", help="The card's reflectance: 0.18 for a grey card (default), about 0.9 for white paper. "
+                               "(config: tone.illuminant.reference_reflectance)")]
+CardFacing = Annotated[str | None, typer.Option(
+    "--card-facing", help="How the card or colour checker was held: camera (default; corrected with the lights "
+                          "the face shows) or light (turned towards the key light). (config: "
+                          "tone.illuminant.reference_facing)")]
+White = Annotated[str | None, typer.Option(
+    "--white", metavar="R,G,B|RUN",
+    help="The light's white level W, for photos taken under one setup: three numbers, or a finished fit (its folder "
+         "or params.json) whose W to reuse, e.g. the fit of one photo with a card. (config: tone.illuminant.white)")]
+Checker = Annotated[str | None, typer.Option(
+    "--checker", help="Find a ColorChecker in the photo and read the light's level from its grey patches: auto "
+                      "(default; when colour-checker-detection is installed), on (an error without one), off. "
+                      "(config: tone.illuminant.checker)")]
 
 SHORTCUTS = {
     "--model": "model",
@@ -164,7 +187,14 @@ SHORTCUTS = {
     "--bands": "lights.bands",
     "--light-masks": "decouple.light_masks",
     "--face-region": "decouple.face_region",
+    "--card-reflectance": "tone.illuminant.reference_reflectance",
 }
+TEXT_SHORTCUTS = {
+    "--card": "tone.illuminant.reference_box",
+    "--card-facing": "tone.illuminant.reference_facing",
+    "--checker": "tone.illuminant.checker",
+}
+"""Options whose text is parsed as the config path's type (as ``--set`` parses it); ``--white`` also takes a run."""
 """Options that set one config path each (``--priors`` and ``--iterations`` set several, see ``fit_config``)."""
 
 
@@ -174,7 +204,7 @@ def fit_config(preset: str | None = None, config_file: Path | None = None, sets:
     shortcut options by option name without dashes (``lights=3``, ``iterations="300,400,200"``, ``priors``;
     None = not given), then ``sets`` (``PATH=VALUE``, in order). Raises UsageError naming the option."""
     given = {f"--{name.replace('_', '-')}": value for name, value in shortcuts.items() if value is not None}
-    unknown = set(given) - set(SHORTCUTS) - {"--iterations", "--priors"}
+    unknown = set(given) - set(SHORTCUTS) - set(TEXT_SHORTCUTS) - {"--iterations", "--priors", "--white"}
     if unknown:
         raise TypeError(f"fit_config: no shortcut option {', '.join(sorted(unknown))}")
     check_ranges({option: value for option, value in given.items() if option in RANGES})
@@ -187,7 +217,15 @@ def fit_config(preset: str | None = None, config_file: Path | None = None, sets:
     if "--iterations" in given:
         stages = parse_iterations(given["--iterations"])
         changes.update({f"iterations.stage{k + 1}": steps for k, steps in enumerate(stages)})
-    config = override(config, **changes)
+    try:
+        config = override(config, **changes)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    for option, path in TEXT_SHORTCUTS.items():
+        if option in given:
+            config = _set_option(config, option, f"{path}={given[option]}")
+    if "--white" in given:
+        config = _set_option(config, "--white", f"tone.illuminant.white={white_level(given['--white'])}")
     if "--priors" in given:
         try:
             config = presets.with_ablation(config, priors=given["--priors"])
@@ -200,6 +238,29 @@ def fit_config(preset: str | None = None, config_file: Path | None = None, sets:
             raise UsageError(f"--set {assignment}: {error}") from None
     check_face_model(config.model)
     return config
+
+
+def _set_option(config: FitConfig, option: str, assignment: str) -> FitConfig:
+    """``config`` with a shortcut's ``PATH=VALUE``; UsageError naming the option."""
+    try:
+        return set_from_text(config, assignment)
+    except ValueError as error:
+        raise UsageError(f"{option}: {error}") from None
+
+
+def white_level(text: str) -> str:
+    """``--white``'s value as ``R,G,B``: as given, or the white level a finished fit recorded (its folder or
+    params.json: ``illuminant.white``). UsageError (one line) for a run without one."""
+    path = Path(text)
+    if not path.exists():
+        return text
+    file = path / "params.json" if path.is_dir() else path
+    try:
+        white = json.loads(file.read_text())["illuminant"]["white"]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise UsageError(f"--white {text}: not a finished fit with a white level (params.json's illuminant.white; "
+                         "the default preset records it)") from None
+    return ",".join(f"{float(v):.5f}" for v in white)
 
 
 def _preset(name: str) -> FitConfig:

@@ -100,16 +100,16 @@ def uv_scores(source: FitOutput, target: FitOutput, shadow: np.ndarray | None = 
               "texels": int(region.sum()), "speckle": float(np.mean([d["speckle"] for d in details])),
               "detail": float(np.mean([d["detail"] for d in details]))}
     if shadow is not None:
-        working = _working_size(shadow, source.frames[0].photo_srgb.shape[:2])
+        working = _working_frame(shadow, source.framing)
         scores["edge_fringe"] = edge_fringe(*linear, unwrap(working[..., None], source.views[0])[..., 0], region)
     return scores
 
 
-def _working_size(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """A mask in the photo's pixels resampled to the fit's working frame [H, W] (area average)."""
-    from PIL import Image
+def _working_frame(mask: np.ndarray, framing) -> np.ndarray:
+    """A mask [H0, W0] in the photo's pixels resampled to the fit's working frame [H, W] (its crop and scale)."""
+    from deface.io.images import resize_max
 
-    return np.asarray(Image.fromarray((mask * 255).astype(np.uint8)).resize(shape[::-1], Image.BILINEAR)) / 255.0
+    return framing.window(resize_max(mask[..., None].astype(np.float32), max(framing.scene_size))[0])[..., 0]
 
 
 def fit_detail(result: FitOutput) -> dict[str, float]:

@@ -1,8 +1,10 @@
 """The skin-tone benchmark: does the recovered albedo keep each person's tone?
 
 A folder holds ``images/`` and ``MANIFEST.tsv`` (columns ``file`` and ``tone_group``; ``gt_ita`` when the true
-albedo's ITA is known, as in ``../shared/data/skin-tone-synth``). Every photo is fitted with each variant
-(the chosen preset, and NextFace as the baseline), cached per photo with its configuration, and scored by
+albedo's ITA is known, as in ``../shared/data/skin-tone-synth``; ``settings``, ``PATH=VALUE`` separated by ``;``,
+for a photo's own settings, e.g. the box of the card it shows, as ``benchmarks/tone_truth.py`` writes them).
+Every photo is fitted with each variant (the chosen preset, and NextFace as the baseline), cached per photo with
+its configuration, and scored by
 :mod:`deface.models.ita`: the ITA of the diffuse texture against the reference, which is ``gt_ita`` where
 given and otherwise the ITA of the photo's lit skin over the same facial regions (a proxy: it includes the
 photo's light and exposure).
@@ -33,7 +35,7 @@ from scipy import stats
 from deface.eval.benchmark import cached_scores, config_json, map_in_processes
 from deface.eval.sheets import image_grid
 from deface.fit import presets
-from deface.fit.config import FitConfig, override
+from deface.fit.config import FitConfig, override, set_from_text
 
 GROUP_ORDER = ("dark", "medium", "light")
 BASELINE = "nextface"
@@ -46,6 +48,7 @@ class TonePhoto:
     file: str
     group: str
     gt_ita: float | None  # the true albedo's ITA (synthetic sets), else None
+    settings: tuple[str, ...] = ()  # PATH=VALUE applied to this photo's fit (e.g. its card's box)
 
     @property
     def stem(self) -> str:
@@ -62,7 +65,8 @@ def read_manifest(folder: Path) -> list[TonePhoto]:
     missing = {"file", "tone_group"} - set(rows[0] if rows else {})
     if missing:
         raise ValueError(f"{manifest}: missing column(s) {', '.join(sorted(missing))}")
-    photos = [TonePhoto(r["file"], r["tone_group"], float(r["gt_ita"]) if r.get("gt_ita") else None) for r in rows]
+    photos = [TonePhoto(r["file"], r["tone_group"], float(r["gt_ita"]) if r.get("gt_ita") else None,
+                        tuple(s.strip() for s in (r.get("settings") or "").split(";") if s.strip())) for r in rows]
     absent = [p.file for p in photos if not (folder / "images" / p.file).is_file()]
     if absent:
         raise ValueError(f"{folder / 'images'}: missing {', '.join(absent)}")
@@ -78,6 +82,9 @@ def _fit_photo(task: tuple) -> dict:
     folder, photo, preset, schedule, out_dir, models_dir = task
     result_dir = Path(out_dir) / preset / photo.stem
     config = variant_config(preset, schedule)
+    if preset != BASELINE:  # the photo's own settings (its card) are the method's; NextFace has no white level
+        for assignment in photo.settings:
+            config = set_from_text(config, assignment)
     cached = cached_scores(result_dir / "tone.json", config)
     if cached is not None:
         return cached
@@ -110,11 +117,13 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
     skin = frame.face_classifier.numpy() > 0.5
     photo = photo_tone(frame.photo_srgb, pixel_uvs(fragments, frame.geometry.mesh), fragments.mask.numpy() > 0, skin)
     to_srgb = lambda t: linear_to_srgb(t.detach().clamp(0, 1).numpy())  # noqa: E731
+    tone = result.skin_tone()
     return {"albedo_ita": texture_ita(to_srgb(result.textures.diffuse)),
             "initial_ita": texture_ita(to_srgb(result.initial_textures.diffuse)),
             "photo_ita": photo.ita, "photo_pixels": photo.pixels, "seconds": seconds,
             **fit_detail(result),
-            "tone": result.tone, "illuminant": result.illuminant, "ita_interval": result.skin_tone()["ita_interval"]}
+            "tone": result.tone, "illuminant": result.illuminant, "ita_interval": tone["ita_interval"],
+            "ita_interval_2sigma": tone["ita_interval_2sigma"]}
 
 
 def run_tone_benchmark(folder: Path, out_dir: Path, preset: str, baseline: bool, schedule: dict,
@@ -169,14 +178,19 @@ def summary(photos: list[TonePhoto], records: dict) -> dict:
 
 
 def _interval_figures(photos: list[TonePhoto], records: dict, reference: np.ndarray) -> dict:
-    """How often the reference lies within the fits' ITA interval for the white level's spread, and the intervals'
-    mean width (NaN for a variant without intervals: no white level, or records cached before they existed)."""
-    ranges = [records[p.stem].get("ita_interval") for p in photos]
-    scored = [(r, ref) for r, ref in zip(ranges, reference, strict=True) if r is not None and np.isfinite(ref)]
-    if not scored:
-        return {"in_interval": float("nan"), "interval_width": float("nan")}
-    return {"in_interval": float(np.mean([low <= ref <= high for (low, high), ref in scored])),
-            "interval_width": float(np.mean([high - low for (low, high), _ in scored]))}
+    """How often the reference lies within the fits' ITA interval for the white level's one-sigma spread (about
+    68 % if the spread is right) and its two-sigma spread (about 95 %), and the one-sigma intervals' mean and median
+    width (NaN for a variant without intervals: no white level, or records cached before they existed)."""
+    figures = {}
+    for key, name in (("ita_interval", "in_interval"), ("ita_interval_2sigma", "in_interval_2sigma")):
+        ranges = [records[p.stem].get(key) for p in photos]
+        scored = [(r, ref) for r, ref in zip(ranges, reference, strict=True) if r is not None and np.isfinite(ref)]
+        figures[name] = float(np.mean([low <= ref <= high for (low, high), ref in scored])) if scored else float("nan")
+        if key == "ita_interval":
+            widths = [high - low for (low, high), _ in scored]
+            figures["interval_width"] = float(np.mean(widths)) if widths else float("nan")
+            figures["interval_median_width"] = float(np.median(widths)) if widths else float("nan")
+    return figures
 
 
 def _mean_of(records: dict, photos: list[TonePhoto], group: str, key: str) -> float:
@@ -196,8 +210,9 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
              " texture's fine contrast beyond the photo's, relative to its level, x100, mean per group (0 = none);"
              " detail: its fine contrast as a share of the photo's (1 = all of it; docs/textures.md). In interval: the"
              " share of photos whose reference lies within the fit's ITA interval for its white level's one-sigma"
-             " spread (params.json skin_tone.ita_interval; about 68 % if that spread is right); interval width: their"
-             " mean width in degrees."]
+             " spread (params.json skin_tone.ita_interval; about 68 % if that spread is right), in 2-sigma: within"
+             " the two-sigma interval (about 95 %); interval width: the one-sigma intervals' median width in"
+             " degrees."]
     records = with_proxy(photos, records)
     if PROXY in records:
         lines[-1] += (f" The row \"{PROXY}\" is the reference photo sets use (a proxy) scored against the truth:"
@@ -205,15 +220,17 @@ def report_markdown(photos: list[TonePhoto], records: dict, title: str, command:
     lines.append("")
     groups = list(summary(photos, next(iter(records.values())))["group_mae"])
     lines += ["| variant | MAE | " + " | ".join(f"MAE {g}" for g in groups) + " | bias | Spearman | slope |"
-              " mean signed | max error | in interval | interval width | " + " | ".join(f"speckle {g}" for g in groups)
-              + " | " + " | ".join(f"detail {g}" for g in groups) + " |", "|---" * (9 + 3 * len(groups)) + "|"]
+              " mean signed | max error | in interval | in 2-sigma | interval width | "
+              + " | ".join(f"speckle {g}" for g in groups) + " | " + " | ".join(f"detail {g}" for g in groups) + " |",
+              "|---" * (10 + 3 * len(groups)) + "|"]
     for variant, recs in records.items():
         s = summary(photos, recs)
         worst = max(abs(recs[p.stem]["albedo_ita"] - reference_ita(p, recs[p.stem])) for p in photos
                     if np.isfinite(reference_ita(p, recs[p.stem])))
         cells = [f"{s['mae']:.1f}", *[f"{s['group_mae'][g]:.1f}" for g in groups], f"{s['bias']:.2f}",
                  f"{s['spearman']:.2f}", f"{s['slope']:.2f}", f"{s['mean_signed']:+.1f}", f"{worst:.1f}",
-                 _cell(100 * s["in_interval"], "{:.0f} %"), _cell(s["interval_width"], "{:.1f}"),
+                 _cell(100 * s["in_interval"], "{:.0f} %"), _cell(100 * s["in_interval_2sigma"], "{:.0f} %"),
+                 _cell(s["interval_median_width"], "{:.1f}"),
                  *[_cell(s['group_speckle'][g]) for g in groups], *[_cell(s['group_detail'][g]) for g in groups]]
         lines.append(f"| {variant} | " + " | ".join(cells) + " |")
     lines += ["", "| photo | group | reference | " + " | ".join(v if v == PROXY else f"{v} albedo" for v in records)

@@ -15,6 +15,7 @@ import torch
 
 from deface.export.outputs import PARAMS_FORMAT
 from deface.fit.config import FitConfig, from_dict
+from deface.fit.framing import Framing
 from deface.fit.output import FitOutput, OutputFrame, RunRecord, StoredPose, frozen_geometry
 from deface.fit.target import FitTarget
 from deface.fit.texels import frame_views
@@ -22,6 +23,9 @@ from deface.models.registry import load_face_model
 from deface.render.mesh import Textures
 from deface.render.renderer import Renderer, ShadowTransfer
 from deface.render.supersample import supersampled_camera
+
+OLDEST_FORMAT = 2
+"""The oldest ``params.npz`` format :func:`load_fit` reads (2: a fit of the whole frame, without a crop)."""
 
 
 class FitFormatError(ValueError):
@@ -37,16 +41,17 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     pose = StoredPose(*(torch.as_tensor(arrays[name], dtype=torch.float32)
                         for name in ("identity", "expression", "rotation", "translation", "focal")))
     renderer = Renderer(FitTarget.render_config(config))
-    size = (int(params["camera"]["width"]), int(params["camera"]["height"]))
+    framing = _framing(params)
     frames = []
     for frame in range(pose.expression.shape[0]):
-        geometry = frozen_geometry(model, pose, frame, size)
+        geometry = frozen_geometry(model, pose, frame, framing)
         camera = supersampled_camera(geometry.camera, config.render.supersampling)
+        scene = arrays["scene_srgb"][frame].astype(np.float32) / 255.0 if "scene_srgb" in arrays else None
         frames.append(OutputFrame(
             geometry, _transfer(arrays, frame, config), arrays["photos_srgb"][frame].astype(np.float32),
             _tensor(arrays["face_classifier"][frame]), _tensor(arrays["light_masks"][frame]),
             _tensor(arrays["face_region"][frame]), arrays["landmarks_2d"][frame],
-            (camera, renderer.rasterize(geometry.mesh, camera))))
+            (camera, renderer.rasterize(geometry.mesh, camera)), scene))
     textures = Textures(*(_tensor(arrays[name]) for name in ("diffuse", "specular", "roughness")))
     losses, terms = read_loss_log(folder / "loss_log.csv")
     record = RunRecord(params.get("seconds_per_stage", {}), losses, terms, params.get("notes", []),
@@ -57,8 +62,7 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     return FitOutput(model, config, tuple(frames), pose.identity, pose.expression, pose.rotation,
                      pose.translation, pose.focal, _tensor(arrays["albedo"]), _tone(params),
                      _tensor(arrays["lights"]), tuple(int(k) for k in arrays["kept"]), textures, None,
-                     seen, confidence, views, params.get("illuminant"),
-                     float(params["camera"].get("working_scale", 1.0)), None, record, renderer)
+                     seen, confidence, views, params.get("illuminant"), framing, None, record, renderer)
 
 
 def _read(folder: Path) -> tuple[dict[str, np.ndarray], dict]:
@@ -69,7 +73,7 @@ def _read(folder: Path) -> tuple[dict[str, np.ndarray], dict]:
     with np.load(folder / "params.npz") as npz:
         arrays = {name: npz[name] for name in npz.files}
     version = int(arrays["format_version"]) if "format_version" in arrays else 1
-    if version < PARAMS_FORMAT:
+    if version < OLDEST_FORMAT:
         raise FitFormatError(
             f"{folder}: written by an older deface (params.npz format {version}, this version reads "
             f"{PARAMS_FORMAT}): it lacks the pose, lights, shadow transfer and photos needed to re-render; "
@@ -78,6 +82,15 @@ def _read(folder: Path) -> tuple[dict[str, np.ndarray], dict]:
         raise FitFormatError(f"{folder}: params.npz format {version} is newer than this deface reads "
                              f"({PARAMS_FORMAT}); update deface")
     return arrays, params
+
+
+def _framing(params: dict) -> Framing:
+    """The crop the fit worked on; a format-2 fit (no ``crop``) worked on the whole frame, its camera in working
+    pixels."""
+    if "crop" in params:
+        return Framing.from_record(params["crop"])
+    camera = params["camera"]
+    return Framing.whole((int(camera["width"]), int(camera["height"])), float(camera.get("working_scale", 1.0)))
 
 
 def read_loss_log(path: Path) -> tuple[dict[str, list[float]], dict[str, list[dict[str, float]]]]:

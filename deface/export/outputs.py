@@ -7,9 +7,11 @@ textures/confidence.png                    how well the photo(s) constrain each 
 mesh.obj + mesh.mtl, mesh.glb              fitted mesh (cm; GLB in metres), a photo's expression; for a clip
                                            the identity with a neutral expression
 params.json, params.npz                    named parameters and the run record; large arrays in the npz
-render.png, render_face.png                I_out and I_R (sRGB); for a clip under frames/<i>/
-lights/<k>.png, masks/light_<k>.png        I_Rs and M_L of each kept light k (k = the light's index)
-masks/face.png                             M_o
+render.png                                 I_out (sRGB): the whole photo at the working scale with the fitted
+                                           face composited where M_o says so; for a clip under frames/<i>/
+render_face.png                            I_R (sRGB) over the working frame (the crop around the face)
+lights/<k>.png, masks/light_<k>.png        I_Rs and M_L of each kept light k (k = the light's index), working frame
+masks/face.png                             M_o, working frame
 loss_log.csv                               stage, step, loss, then one column per named loss term
 report.html + report/                      the page that shows the fit (deface/report/html.py)
 """
@@ -29,9 +31,11 @@ from deface.fit.config import to_dict
 from deface.fit.output import FitOutput
 from deface.report.html import write_report
 
-PARAMS_FORMAT = 2
+PARAMS_FORMAT = 3
 """Version of ``params.npz`` (its ``format_version``): 2 holds everything :func:`deface.export.load.load_fit`
-needs to rebuild the fit (1, unversioned, had only the export mesh, textures and masks)."""
+needs to rebuild the fit (1, unversioned, had only the export mesh, textures and masks); 3 adds the crop around
+the face (params.json ``crop``) and the whole photo at the working scale (``scene_srgb``), and gives the camera
+in the input's pixels. Format 2 is read as a fit of the whole frame."""
 
 
 def write_fit(result: FitOutput, final_folder: Path, record: dict) -> Path:
@@ -68,7 +72,7 @@ def _write_mesh(result: FitOutput, folder: Path) -> None:
 def _write_renders(result: FitOutput, renders: list, folder: Path) -> None:
     for frame, rendered in enumerate(renders):
         base = folder if len(renders) == 1 else folder / "frames" / f"{frame:03d}"
-        save_png(base / "render.png", _np(result.composite(rendered, frame)))
+        save_png(base / "render.png", _np(result.composite_photo(rendered, frame)))
         save_png(base / "render_face.png", _np(rendered.face))
         save_png(base / "masks" / "face.png", _np(rendered.face_region), srgb=False)
         for slot, light in enumerate(result.kept):
@@ -79,7 +83,6 @@ def _write_renders(result: FitOutput, renders: list, folder: Path) -> None:
 def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) -> None:
     config, model = result.config, result.model
     kept = list(result.kept)
-    width, height = result.size
     lights = _np(result.lights)
     params = {
         "format": "deface-params/1",
@@ -90,11 +93,14 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
         "pose": {"rotation_axis_angle": _np(result.rotation).tolist(),
                  "translation_cm": _np(result.translation).tolist(),
                  "convention": "model -> camera; camera x right, y down, z forward (OpenCV)"},
-        "camera": {"focal_px": float(result.focal), "width": width, "height": height,
-                   "principal_point": [width / 2, height / 2], "working_scale": result.scale},
+        "camera": _camera(result, record.get("file_size")),
+        "crop": result.framing.record(),
         "lights": {"bands": config.lights.bands, "kept": kept, "initial_count": int(lights.shape[0]),
                    "sh": {str(k): lights[k].tolist() for k in kept},
                    "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame"},
+        "textures": {"size": int(result.textures.diffuse.shape[0]),
+                     "chosen_by": "config" if config.texture_size is not None else
+                     "the face's pixels (texture_size none, texture_size_range)"},
         "albedo_coefficients": _np(result.albedo).tolist(),
         "skin_tone": {"ita": result.tone if config.tone.free_tone else None, "free": config.tone.free_tone,
                       "convention": "ITA degrees on the albedo model's tone axis",
@@ -119,6 +125,26 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
     np.savez_compressed(folder / "params.npz", **fit_arrays(result, renders))
 
 
+def _camera(result: FitOutput, file_size: list[int] | None = None) -> dict:
+    """The camera in the input's pixels (the whole photo as decoded, principal point at its centre), the working
+    frame's (the crop the fit worked on), and, for a photo decoded smaller than its file (``file_size``, above
+    LOAD_MAX_SIDE), the file's."""
+    framing = result.framing
+    width, height = framing.input_size
+    working_width, working_height = framing.size
+    focal = float(result.focal) / framing.scale
+    camera = {"focal_px": focal, "width": width, "height": height,
+              "principal_point": [width / 2, height / 2], "working_scale": framing.scale,
+              "pixels": "the input frame's as decoded (x right, y down, pixel centres at +0.5)",
+              "working": {"focal_px": float(result.focal), "width": working_width, "height": working_height,
+                          "principal_point": [round(v, 4) for v in framing.principal_point]}}
+    if file_size is not None and tuple(file_size) != (width, height):
+        ratio = max(file_size) / max(width, height)
+        camera["file"] = {"focal_px": focal * ratio, "width": int(file_size[0]), "height": int(file_size[1]),
+                          "principal_point": [file_size[0] / 2, file_size[1] / 2]}
+    return camera
+
+
 def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
     """The arrays of ``params.npz`` (format :data:`PARAMS_FORMAT`): the export mesh, textures and masks, and
     what re-rendering the fit needs (coefficients, pose, all lights, the frames' shadow transfer and photos)."""
@@ -138,6 +164,8 @@ def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
         "face_classifier": np.stack([_np(frame.face_classifier) for frame in frames]).astype(np.float32),
         "photos_srgb": np.stack([frame.photo_srgb for frame in frames]).astype(np.float16),
     }
+    if frames[0].scene_srgb is not None:  # the photo around the crop, for render.png (8 bits, as written)
+        arrays["scene_srgb"] = np.stack([to_uint8(frame.scene_srgb, srgb=False) for frame in frames])
     if result.seen is not None:
         arrays["texture_seen"] = result.seen.astype(np.float16)
     if result.confidence is not None:

@@ -265,7 +265,8 @@ class Stage1Config:
     expression_weight: float = 1e-3
     """w_ex of mean(beta) (blendshapes) or mean(beta²) (PCA expressions)."""
     initial_fov_degrees: float = 20.0
-    """Field of view over the longest image side that sets the initial focal length."""
+    """Field of view over the longest side of the whole photo (not of the crop around the face the fit works on)
+    that sets the initial focal length."""
     optimise_focal: bool = True
     """Fit the focal length (shared by all frames); off: keep the initial one."""
     normalise_by: Literal["face", "image"] = "face"
@@ -312,6 +313,24 @@ class RenderSettings:
 
 
 @dataclass(frozen=True)
+class CropConfig:
+    """The crop around the face that the fit works on (deface/fit/framing.py); everything written refers back
+    to the whole photo."""
+
+    enabled: bool = True
+    """Crop each frame to a square around the face's landmarks (a clip: one crop around every frame's face);
+    off: the whole frame, as before issue 39."""
+    margin: float = 2.0
+    """Side of the crop over the larger side of the landmarks' box (chin to forehead top, temple to temple):
+    2 keeps the hair above the forehead, the neck below the chin and about half a face of background beside
+    each cheek (the framing of CelebAMask-HQ and FFHQ's faces). The crop is cut to the frame."""
+
+    def __post_init__(self) -> None:
+        if not self.margin >= 1.0:
+            raise ValueError(f"crop.margin must be at least 1 (the crop holds the whole face), got {self.margin}")
+
+
+@dataclass(frozen=True)
 class FitConfig:
     """Everything one fit uses. Build from a preset: ``presets.get("default")``."""
 
@@ -319,10 +338,30 @@ class FitConfig:
     """Name of the preset this config came from (recorded in params.json)."""
     model: str = "ict"
     """Face model: "ict" (embedded default) or "bfm" (BFM 2017 + AlbedoMM, user-supplied)."""
-    resolution: int = 256
-    """Longest side of the working image in pixels (the paper evaluates at 256)."""
-    texture_size: int = 512
-    """UV texture resolution of the outputs (and of stage 3's maps)."""
+    resolution: int = 512
+    """Cap on the longest side of the working image, the crop around the face (``crop``), in pixels: the fit
+    works at the photo's own scale up to this, never upsampled. 512 puts a face of up to about 256 pixels
+    across in the working image (the paper's 256² crops hold faces of about 150); stage 2 runs at
+    ``stage2_resolution`` or less, stage 3 at this size."""
+    clip_resolution: int = 256
+    """The same cap for a clip of several frames (with ``resolution`` if that is smaller): every frame's pixels
+    cost the fit again, and the frames together constrain the shared maps. 8 frames of 480² at 480 instead of 256
+    took stage 3 ~3.5x the time and memory (BENCHMARKS.md)."""
+    crop: CropConfig = field(default_factory=CropConfig)
+    """The crop around the face."""
+    stage2_resolution: int = 256
+    """Stage 2 fits at the working size halved until its longer side is at most this (deface/fit/coarse.py;
+    pose, shape, albedo coefficients, lights and f, g are not tied to the pixel grid); stage 3 refines the maps
+    at the full working size. 0 = stage 2 at the working size. Its ``iterations.stage2_coarse_share`` halves
+    once more."""
+    texture_size: int | None = None
+    """Side of the UV maps of the outputs and of stage 3; None: what the face's pixels support, about one
+    working pixel per texel where the face is seen (deface/fit/framing.py), a power of two within
+    ``texture_size_range``."""
+    texture_size_range: tuple[int, int] = (512, 1024)
+    """Smallest and largest side of the UV maps when ``texture_size`` is None. 512 (the earlier fixed default)
+    is the smallest: a smaller face's maps hold no more detail at 512 (stage 3's pyramid gates the levels finer
+    than its pixels) but viewers and the benchmarks keep their size."""
     stage2_texture_size: int = 128
     """UV resolution of the albedo model's maps T^0 in stage 2 (the albedo model's native resolution: stage
     2's textures are smooth by design)."""
@@ -365,6 +404,15 @@ class FitConfig:
     """Video: take every k-th frame before choosing `max_frames`."""
     face_index: int = 0
     """Which face when several are found (0 = largest)."""
+
+    def __post_init__(self) -> None:
+        low, high = self.texture_size_range
+        if not 16 <= low <= high <= 4096:
+            raise ValueError(f"texture_size_range must be two sizes with 16 <= smallest <= largest <= 4096, got "
+                             f"{self.texture_size_range}")
+        if min(self.resolution, self.clip_resolution) < 1 or self.stage2_resolution < 0:
+            raise ValueError("resolution and clip_resolution must be positive and stage2_resolution at least 0, got "
+                             f"{self.resolution}, {self.clip_resolution} and {self.stage2_resolution}")
 
 
 RENAMED = {

@@ -2,7 +2,9 @@
 consume (nothing outside deface/fit reaches into the stages). :func:`deface.export.load.load_fit` rebuilds
 the same object from an output folder.
 
-Shapes: T frames of H x W working pixels, V vertices, n initial lights, K kept, B*B SH coefficients.
+Shapes: T frames of H x W working pixels (a crop around the face of the input's frames, whose whole frame at
+the working scale is the Hs x Ws *scene*: deface/fit/framing.py), V vertices, n initial lights, K kept, B*B
+SH coefficients.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 import torch
 
 from deface.fit.config import FitConfig
+from deface.fit.framing import Framing
 from deface.fit.log import FitLog
 from deface.fit.scene import FrameGeometry, topology_tensors
 from deface.fit.state import FrameRender, StageContext, compose_face
@@ -64,6 +67,8 @@ class OutputFrame:
     face_region: torch.Tensor  # [H, W] M_o
     landmarks: np.ndarray  # [P, 2] the detected MediaPipe points, working pixels
     cast: tuple[Camera, Fragments]  # the supersampled camera and what covers each of its samples
+    scene_srgb: np.ndarray | None = None  # [Hs, Ws, 3] the whole input frame at the working scale, sRGB;
+    # None when the working frame is the whole frame
 
     @property
     def photo(self) -> torch.Tensor:
@@ -93,7 +98,7 @@ class FitOutput:
     confidence: np.ndarray | None  # [Ht, Wt] how well the frames constrain each texel (None: unknown)
     views: tuple[TexelView, ...]  # per frame: where each texel lands and how it is seen
     illuminant: dict | None  # the scene's illuminant estimate (its record), None when not estimated
-    scale: float  # working / original resolution
+    framing: Framing  # where the working frames lie in the input's (crop, scale, principal point)
     kept_frames: list[int] | None  # positions of the fitted frames among the input's (None: all)
     record: RunRecord
     renderer: Renderer  # the fit's renderer settings (bands, shadows, rays, seed)
@@ -103,11 +108,17 @@ class FitOutput:
         (:func:`~deface.models.ita.texture_tone`; no interval without a white level: a preset without the
         scene-light prior, or a fit saved before it)."""
         sigma = (self.illuminant or {}).get("level_sigma")
-        return texture_tone(self.textures.diffuse.detach().numpy(), sigma)
+        return {**texture_tone(self.textures.diffuse.detach().numpy(), sigma),
+                "light_level": (self.illuminant or {}).get("source")}
 
     @property
     def num_frames(self) -> int:
         return len(self.frames)
+
+    @property
+    def scale(self) -> float:
+        """Working pixels per input pixel."""
+        return self.framing.scale
 
     @property
     def size(self) -> tuple[int, int]:
@@ -139,7 +150,8 @@ class FitOutput:
                 frozen.geometry, frozen.transfer, np.asarray(target.frames_srgb[frozen.index], dtype=np.float32),
                 context.inputs.face_classifier[frozen.index], rendered.light_masks.detach(),
                 rendered.face_region.detach(), np.asarray(target.landmarks[frozen.index].points),
-                (frozen.camera, frozen.fragments)))
+                (frozen.camera, frozen.fragments),
+                None if target.scene_srgb is None else np.asarray(target.scene_srgb[frozen.index], np.float32)))
         tone = float(scene.tone.detach())
         light = context.inputs.scene_light
         return cls(
@@ -147,7 +159,7 @@ class FitOutput:
                 scene.identity, scene.expression, scene.rotation, scene.translation, scene.focal, scene.albedo)),
             tone, scene.lights.detach().clone(), tuple(context.decoupling.kept), finished.textures, stage3.initial,
             finished.seen, finished.confidence, tuple(stage3.views),
-            light.illuminant.record() if light is not None else None, target.scale, target.kept_frames, record,
+            light.illuminant.record() if light is not None else None, target.framing, target.kept_frames, record,
             context.renderer)
 
     def export_vertices(self) -> np.ndarray:
@@ -193,9 +205,21 @@ class FitOutput:
         return renders
 
     def composite(self, rendered: FrameRender, frame: int) -> torch.Tensor:
-        """I_out [H, W, 3] linear: the face where M_o says so, the input elsewhere."""
+        """I_out [H, W, 3] linear over the working frame: the face where M_o says so, the input elsewhere."""
         weight = rendered.face_region[..., None]
         return rendered.face * weight + self.frames[frame].photo * (1 - weight)
+
+    def composite_photo(self, rendered: FrameRender, frame: int) -> torch.Tensor:
+        """I_out [Hs, Ws, 3] linear over the whole photo at the working scale: :meth:`composite` pasted into
+        the frame's scene (what ``render.png`` shows)."""
+        working = self.composite(rendered, frame)
+        scene = self.frames[frame].scene_srgb
+        if scene is None:
+            return working
+        photo = torch.as_tensor(srgb_to_linear(scene), dtype=torch.float32)
+        (left, top), (width, height) = self.framing.scene_offset, self.framing.size
+        photo[top:top + height, left:left + width] = working
+        return photo
 
 
 @dataclass(frozen=True)
@@ -208,14 +232,17 @@ class StoredPose:
     translation: torch.Tensor
     focal: torch.Tensor
 
-    def camera(self, frame: int, width: int, height: int) -> Camera:
-        return Camera(self.focal, self.rotation[frame], self.translation[frame], width, height)
+    def camera(self, frame: int, width: int, height: int,
+               principal_point: tuple[float, float] | None = None) -> Camera:
+        return Camera(self.focal, self.rotation[frame], self.translation[frame], width, height, principal_point)
 
 
-def frozen_geometry(model: FaceModel, pose: StoredPose, frame: int, size: tuple[int, int]) -> FrameGeometry:
-    """A frame's detached geometry from stored parameters (what stage 3 froze)."""
+def frozen_geometry(model: FaceModel, pose: StoredPose, frame: int, framing: Framing) -> FrameGeometry:
+    """A frame's detached geometry from stored parameters (what stage 3 froze), at the working frames of
+    ``framing``."""
     topology = topology_tensors(model)
     with torch.no_grad():
         vertices = model.vertices(pose.identity, pose.expression[frame])
     mesh = Mesh(vertices, topology["triangles"], topology["uvs"], topology["triangle_uvs"])
-    return FrameGeometry(mesh, pose.camera(frame, *size))
+    principal = None if framing.is_whole else framing.principal_point
+    return FrameGeometry(mesh, pose.camera(frame, *framing.size, principal))

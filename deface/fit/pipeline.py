@@ -1,6 +1,7 @@
 """The whole fit for one input (an image, or the frames of a clip), as a list of stage runners:
 
-    landmarks (detect) -> prepare (stage 1, face region h, scene light) -> stage 2 -> stage 3 -> FitOutput
+    landmarks (detect, whole frames) -> crop around the face (frame_target) -> prepare (stage 1, texture
+    size, face region h, scene light) -> stage 2 (at most stage2_resolution) -> stage 3 -> FitOutput
 
 Each runner takes the state so far and returns its result (deface/fit/state.py, docs/design.md);
 :func:`run_stages` keeps them all (:class:`FitState`, for tests and tools that look inside), :func:`fit` and
@@ -16,8 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from deface.fit.coarse import coarse_context
 from deface.fit.config import FitConfig, supports_free_tone
 from deface.fit.decoupling import Decoupling
+from deface.fit.framing import texture_size_for
 from deface.fit.log import FitLog
 from deface.fit.output import FinishedTextures, FitOutput, RunRecord
 from deface.fit.scene import SceneParameters, initial_lights
@@ -26,16 +29,18 @@ from deface.fit.stage1 import fit_landmarks
 from deface.fit.stage2 import Stage2Result, run_stage2
 from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
-from deface.fit.target import FitTarget, scale_landmarks, working_frames
+from deface.fit.target import FitTarget, frame_target
 from deface.fit.texels import complete_textures, seen_texels, texture_confidence
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.ita import texture_tone
 from deface.models.registry import load_face_model
+from deface.priors.checker import CheckerUnavailable, checker_illuminant, find_checker
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
-from deface.priors.illuminant import estimate_illuminant, known_illuminant
+from deface.priors.illuminant import CARD_SOURCES, estimate_illuminant, known_illuminant
 from deface.runtime import keep_freed_memory
+from deface.texture.confidence import triangle_density
 
 
 @dataclass(frozen=True)
@@ -55,15 +60,29 @@ class FitState:
 
 
 def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool):
-    """Landmarks per frame at working resolution; frames without a face are dropped (video)."""
-    work, scale = working_frames(frames, config.resolution)
-    size = (work[0].shape[1], work[0].shape[0])
+    """Landmarks per frame on the whole input frames, and the positions of the frames that have a face (a
+    clip's frames without one are dropped)."""
     if video:
         found = track_video(frames, face_index=config.face_index, source=source)
     else:
         found = [detect_landmarks(frames[0], face_index=config.face_index, source=source)]
     keep = [i for i, item in enumerate(found) if item is not None]
-    return [work[i] for i in keep], [scale_landmarks(found[i], scale, size) for i in keep], scale, keep
+    return [found[i] for i in keep], keep
+
+
+def detect_target(frames: list[np.ndarray], config: FitConfig, source: str, video: bool,
+                  log: FitLog | None = None) -> FitTarget:
+    """The target of input ``frames``: landmarks on the whole frames, then the crop around the face
+    (:func:`deface.fit.target.frame_target`), said in ``log``."""
+    log = log or FitLog(quiet=True)
+    landmarks, kept = detect(frames, config, source, video)
+    if landmarks[0].num_faces > 1:
+        log.info(f"{landmarks[0].num_faces} faces found; fitting face {config.face_index} (0 = largest)")
+    if len(kept) < len(frames):
+        log.info(f"frames without a face were left out: {sorted(set(range(len(frames))) - set(kept))}")
+    target = frame_target([frames[i] for i in kept], landmarks, config, kept_frames=kept)
+    _log_framing(target, log)
+    return target
 
 
 def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source: str = "input",
@@ -71,14 +90,21 @@ def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source:
     """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``."""
     log = log or FitLog(name=source)
     log.start("landmarks")
-    work, landmarks, scale, kept = detect(frames, config, source, video)
-    if landmarks[0].num_faces > 1:
-        log.info(f"{landmarks[0].num_faces} faces found; fitting face {config.face_index} (0 = largest)")
-    if len(kept) < len(frames):
-        log.info(f"frames without a face were left out: {sorted(set(range(len(frames))) - set(kept))}")
+    target = detect_target(frames, config, source, video, log)
     log.stop("landmarks")
-    target = FitTarget(work, landmarks, scale, kept_frames=kept)
     return fit_target(target, config, models_dir=models_dir, log=log)
+
+
+def _log_framing(target: FitTarget, log: FitLog) -> None:
+    """Say which part of the photo the fit works on, and at what scale."""
+    framing = target.framing
+    size = "x".join(map(str, framing.size))
+    if framing.is_whole:
+        log.info(f"working image: the whole frame at {size} pixels (scale {framing.scale:.3g})")
+        return
+    left, top, right, bottom = (round(v) for v in framing.box)
+    log.info(f"working image: the face's crop ({left}, {top}) to ({right}, {bottom}) of the "
+             f"{'x'.join(map(str, framing.input_size))} frame, at {size} pixels (scale {framing.scale:.3g})")
 
 
 def fit_target(target: FitTarget, config: FitConfig, *, models_dir=None, log: FitLog | None = None) -> FitOutput:
@@ -91,6 +117,18 @@ def run_stages(target: FitTarget, config: FitConfig, *, models_dir=None, log: Fi
     keep_freed_memory()  # no page faults on each step's temporaries (deface/runtime.py)
     with torch_threads(config.threads):
         return _run_stages(target, config, models_dir, log or FitLog())
+
+
+def stage2_context(context: StageContext) -> StageContext:
+    """The level stage 2 runs at: the working frames halved (deface/fit/coarse.py) until their longer side is at
+    most ``config.stage2_resolution``; stage 3 refines the maps at the full working size."""
+    limit, level = context.config.stage2_resolution, context
+    while limit > 0 and max(level.target.size) > limit:
+        level = coarse_context(level)
+    if level is not context:
+        context.log.info(f"stage 2 at {'x'.join(map(str, level.target.size))} pixels (stage2_resolution {limit}), "
+                         f"stage 3 at {'x'.join(map(str, context.target.size))}")
+    return level
 
 
 @contextmanager
@@ -110,7 +148,7 @@ def _run_stages(target: FitTarget, config: FitConfig, models_dir, log: FitLog) -
     np.random.seed(config.seed)
     context, optional = prepare(target, config, models_dir=models_dir, log=log)
     log.start("stage 2")
-    stage2 = run_stage2(context)
+    stage2 = run_stage2(stage2_context(context))
     log.stop("stage 2")
     human_prior, reason = (load_human_prior(models_dir) if context.config.priors.human_prior
                            else (None, "off in config"))
@@ -139,9 +177,11 @@ def _log_tone(context: StageContext, finished: FinishedTextures, log: FitLog) ->
         log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f} (white level {where})")
         return
     darker, lighter = tone["ita_interval"]
-    log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
-             f"level's one-sigma spread ({illuminant.source}); a grey card in the photo "
-             "(tone.illuminant.reference_box) or the light's white level (tone.illuminant.white) narrows it")
+    text = (f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
+            f"level's one-sigma spread ({illuminant.source})")
+    if illuminant.source not in CARD_SOURCES:
+        text += "; a grey card in the photo (--card) or the light's white level (--white) narrows it"
+    log.info(text)
 
 
 @torch.no_grad()
@@ -166,7 +206,8 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     config = _supported_tone(model, config, log)
     log.start("stage 1")
     corr = correspondence_for(model, models_dir=models_dir)
-    result = fit_landmarks(model, corr, target.landmarks, target.size, config.stage1, config.iterations.stage1)
+    result = fit_landmarks(model, corr, target.landmarks, target.size, config.stage1, config.iterations.stage1,
+                           principal_point=target.principal_point, photo_side=max(target.framing.scene_size))
     log.stop("stage 1")
     landmarks = LandmarkTarget(corr, torch.as_tensor(result.landmarks_2d, dtype=torch.float32),
                                torch.as_tensor(corr.weights, dtype=torch.float32),
@@ -178,19 +219,21 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
         lights=initial_lights(config.lights), tone=_initial_tone(model, config),
     )
     decoupling = Decoupling(config.decouple, config.lights.num_lights, target.num_frames, target.size)
-    face = PosedFace.create(model, scene, config, target.size)
+    face = PosedFace.create(model, scene, config, target)
+    texture_size = _texture_size(face, target, config, log)
     classifier, note = _face_classifier(face, target, config, models_dir, log)
     scene_light = None
     if config.tone.scene_light_prior:
-        illuminant = _scene_illuminant(face, target, config)
-        log.info(f"scene illuminant: {illuminant.source}, white level "
+        illuminant = _scene_illuminant(face, target, config, log)
+        where = f" ({illuminant.detail})" if illuminant.detail else ""
+        log.info(f"scene illuminant: {illuminant.source}{where}, white level "
                  f"{np.round(illuminant.white, 3).tolist()}, {illuminant.cct:.0f} K")
         scene_light = start_from_scene(face, target.frames_srgb, classifier, illuminant, config, log)
     elif config.tone.illuminant.white is not None or config.tone.illuminant.reference_box is not None:
         log.info(f"tone.illuminant's white level is not used: the {config.preset} preset does not hold the lights "
                  "to the scene (tone.scene_light_prior off)")
     inputs = FitInputs(target, landmarks, classifier, scene_light)
-    return StageContext.create(inputs, face, decoupling, config, log), {"face_parsing": note}
+    return StageContext.create(inputs, face, decoupling, config, log, texture_size), {"face_parsing": note}
 
 
 def _face_sizes(target: FitTarget) -> torch.Tensor:
@@ -227,14 +270,70 @@ def _face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, mode
 
 
 @torch.no_grad()
-def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig):
-    """The white level the user gives (or points a reference card at), else the estimate from every frame's
-    pixels outside the stage-1 face."""
-    known = known_illuminant(target.frames_srgb, config.tone.illuminant)
+def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig, log: FitLog):
+    """The white level the user gives (or points a reference card at), else a colour checker's in the photo,
+    else the estimate from every frame's pixels outside the stage-1 face: the whole frames, not only the crop
+    around the face."""
+    scene = target.scene_frames()
+    known = known_illuminant(scene, config.tone.illuminant, target.scale)
     if known is not None:
         return known
-    faces = [face.fragments(frame)[1].mask.numpy() > 0 for frame in range(target.num_frames)]
-    return estimate_illuminant(target.frames_srgb, faces, config.tone.illuminant)
+    checker = _checker_illuminant(scene[0], config.tone.illuminant, log)
+    if checker is not None:
+        return checker
+    faces = [_scene_face(face, target, frame) for frame in range(target.num_frames)]
+    return estimate_illuminant(scene, faces, config.tone.illuminant)
+
+
+def _checker_illuminant(photo: np.ndarray, settings, log: FitLog):
+    """W from a colour checker in ``photo`` (the first frame, whole; ``tone.illuminant.checker``), or None, said
+    in the log; ValueError (one line) when it is required ("on") and unavailable or not found."""
+    if settings.checker == "off":
+        return None
+    try:
+        reading = find_checker(photo)
+    except CheckerUnavailable as error:
+        if settings.checker == "on":
+            raise ValueError(f"tone.illuminant.checker=on: {error}") from None
+        log.info(f"{error}; the light's level is estimated from the scene")
+        return None
+    if reading is None:
+        if settings.checker == "on":
+            raise ValueError("tone.illuminant.checker=on: no colour checker found in the photo (its six grey "
+                             "patches must show, unclipped)")
+        return None
+    return checker_illuminant(reading, settings)
+
+
+def _scene_face(face: PosedFace, target: FitTarget, frame: int) -> np.ndarray:
+    """[Hs, Ws] bool: the stage-1 face's coverage of the whole frame at the working scale."""
+    geometry = face.geometry(frame)
+    camera = geometry.camera if target.framing.is_whole else target.framing.scene_camera(geometry.camera)
+    return face.renderer.rasterize(geometry.mesh, camera).mask.numpy() > 0
+
+
+@torch.no_grad()
+def _texture_size(face: PosedFace, target: FitTarget, config: FitConfig, log: FitLog) -> int:
+    """``config.texture_size``, or when it is None what the stage-1 face's pixels support
+    (deface/fit/framing.py), said in the log."""
+    if config.texture_size is not None:
+        return config.texture_size
+    supported = max(_texels_per_side(face, frame) for frame in range(target.num_frames))
+    size = texture_size_for(supported, config.texture_size_range)
+    log.info(f"texture size {size}² (the face's pixels support about {supported:.0f}² texels; "
+             f"texture_size_range {config.texture_size_range[0]}-{config.texture_size_range[1]})")
+    return size
+
+
+def _texels_per_side(face: PosedFace, frame: int) -> float:
+    """The UV maps' side at which the stage-1 face's typical pixel sees one texel: the square root of the median,
+    over the pixels the face covers, of its triangle's pixels per unit of UV area."""
+    geometry, fragments = face.fragments(frame)
+    density = triangle_density(geometry.mesh, geometry.camera, (1, 1))  # pixels per unit of UV area
+    covered = fragments.covered_triangles
+    if covered.numel() == 0:
+        return 0.0
+    return float(density[covered].median().sqrt())
 
 
 def _classifier(source: str, models_dir, skin=None):

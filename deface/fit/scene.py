@@ -47,10 +47,12 @@ class SceneParameters(torch.nn.Module):
     def num_frames(self) -> int:
         return int(self.expression.shape[0])
 
-    def camera(self, frame: int, width: int, height: int, pixel_scale: float = 1.0) -> Camera:
-        """The frame's camera for a (width, height) image of ``pixel_scale`` pixels per working pixel."""
+    def camera(self, frame: int, width: int, height: int, pixel_scale: float = 1.0,
+               principal_point: tuple[float, float] | None = None) -> Camera:
+        """The frame's camera for a (width, height) image of ``pixel_scale`` pixels per working pixel whose
+        principal point is ``principal_point`` (its pixels; None: the image centre)."""
         focal = self.focal if pixel_scale == 1.0 else self.focal * pixel_scale
-        return Camera(focal, self.rotation[frame], self.translation[frame], width, height)
+        return Camera(focal, self.rotation[frame], self.translation[frame], width, height, principal_point)
 
     def clamp_(self, expression_prior: str) -> None:
         """Keep blendshape weights in [0, 1] after each step (projected gradient)."""
@@ -68,12 +70,14 @@ class FrameGeometry:
 
 
 def frame_geometry(model: FaceModel, scene: SceneParameters, topology: dict, frame: int,
-                   size: tuple[int, int], pixel_scale: float = 1.0) -> FrameGeometry:
+                   size: tuple[int, int], pixel_scale: float = 1.0,
+                   principal_point: tuple[float, float] | None = None) -> FrameGeometry:
     """The mesh (model frame) and camera of ``frame`` drawn at ``size`` (``pixel_scale`` pixels per working
-    pixel); ``topology`` holds the model's index tensors."""
+    pixel, principal point ``principal_point``, None: the centre); ``topology`` holds the model's index
+    tensors."""
     vertices = model.vertices(scene.identity, scene.expression[frame])
     mesh = Mesh(vertices, topology["triangles"], topology["uvs"], topology["triangle_uvs"])
-    return FrameGeometry(mesh, scene.camera(frame, *size, pixel_scale))
+    return FrameGeometry(mesh, scene.camera(frame, *size, pixel_scale, principal_point))
 
 
 def topology_tensors(model: FaceModel) -> dict:

@@ -60,6 +60,7 @@ from deface.fit.state import SceneLight
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import KEY_QUANTILE, front_directions, peak_white
 from deface.models.ita import CLIPPED, MIN_PIXELS, in_tone_boxes, ita_of_srgb, pixel_uvs
+from deface.priors.illuminant import CARD_SOURCES, IlluminantEstimate
 
 SKIN_CHROMA = 0.12
 """Largest difference in log(red / green) and log(blue / green) from the cheeks' skin (about 12 %)."""
@@ -128,24 +129,58 @@ def face_skin(face, frames_srgb: list[np.ndarray], classifier) -> tuple[list[np.
 def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
     """Linear RGB [3]: the skin's colour in the key light over the white level ``white`` [3] (the module doc);
     None when too little skin is seen."""
-    balanced = srgb_to_linear(pixels.srgb) / np.asarray(white)
-    unclipped = pixels.srgb < CLIPPED  # [N, 3]
-    skin = _skin_coloured(balanced, unclipped, pixels.in_boxes)
-    level = balanced[:, LEVEL_CHANNEL]
-    usable = skin & unclipped[:, LEVEL_CHANNEL]
-    if usable.sum() < MIN_PIXELS:
+    envelope = key_light_envelope(pixels, white)
+    if envelope is None:
         return None
-    lit = _key_lit(level, pixels, usable)
-    if lit.sum() < MIN_PIXELS:
-        return None
-    balanced = _without_sheen(balanced, pixels, lit)
+    balanced, usable, lit, coef = envelope
     level = balanced[:, LEVEL_CHANNEL]
+    unclipped = pixels.srgb < CLIPPED
     ratios = [_channel_ratio(balanced, level, unclipped[:, c], c, (lit, usable)) for c in range(3)]
     if not np.all(np.isfinite(ratios)):
         return None
-    design = _design(pixels)
-    envelope = design @ _least_squares(design, level, lit)
-    return np.quantile(envelope[usable], KEY_QUANTILE) * np.asarray(ratios)
+    return np.quantile((_design(pixels) @ coef)[usable], KEY_QUANTILE) * np.asarray(ratios)
+
+
+def key_light_envelope(pixels: SkinPixels, white: np.ndarray):
+    """(balanced [N, 3], usable [N], lit [N], coefficients [4]): the skin's pixels over ``white`` less the sheen,
+    which are skin, which are lit, and the lit skin's envelope a0 + a . n of the green level (items 1-4 of the
+    module doc); None when too little skin is seen."""
+    balanced = srgb_to_linear(pixels.srgb) / np.asarray(white)
+    unclipped = pixels.srgb < CLIPPED  # [N, 3]
+    skin = _skin_coloured(balanced, unclipped, pixels.in_boxes)
+    usable = skin & unclipped[:, LEVEL_CHANNEL]
+    if usable.sum() < MIN_PIXELS:
+        return None
+    lit = _key_lit(balanced[:, LEVEL_CHANNEL], pixels, usable)
+    if lit.sum() < MIN_PIXELS:
+        return None
+    balanced = _without_sheen(balanced, pixels, lit)
+    return balanced, usable, lit, _least_squares(_design(pixels), balanced[:, LEVEL_CHANNEL], lit)
+
+
+FACING_RATIO_RANGE = (0.8, 3.0)
+"""The light a surface facing the key light gets over what one facing the camera gets: 1 with the key at the
+camera, 1 / cos(angle) for a hard key light at that angle with no ambient; beyond this range the face's envelope is
+not a light (a frontal face whose skin is clipped, a face lit from behind) and no correction is made."""
+
+
+def facing_camera_ratio(pixels: SkinPixels, white: np.ndarray) -> float | None:
+    """How much more light the skin facing the key light gets than a surface beside the face facing the camera:
+    the lit skin's envelope a0 + a . n (the key light and the ambient as the face shows them, whatever the skin's
+    tone: the envelope's shape is a ratio) at its ``KEY_QUANTILE`` over the skin's normals, which is where W is
+    defined (the start's level, the level term's quantile), over the envelope at the direction to the camera.
+    None when the face shows no usable envelope or the ratio leaves ``FACING_RATIO_RANGE``."""
+    envelope = key_light_envelope(pixels, white)
+    if envelope is None:
+        return None
+    _, usable, _, coef = envelope
+    key = float(np.quantile((_design(pixels) @ coef)[usable], KEY_QUANTILE))
+    towards_camera = pixels.to_camera[usable].mean(0)
+    facing = float(coef[0] + coef[1:] @ (towards_camera / max(np.linalg.norm(towards_camera), 1e-9)))
+    if key <= 0 or facing <= 0:
+        return None
+    ratio = key / facing
+    return ratio if FACING_RATIO_RANGE[0] <= ratio <= FACING_RATIO_RANGE[1] else None
 
 
 def _channel_ratio(balanced: np.ndarray, level: np.ndarray, unclipped: np.ndarray, channel: int,
@@ -232,15 +267,35 @@ def _highlight(direction: np.ndarray, pixels: SkinPixels) -> np.ndarray:
 
 def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant, config, log) -> SceneLight:
     """Scale ``face.scene``'s initial lights to the scene's white level and start the tone at the photo's (in
-    place); returns the scene light the scene-light terms hold the fit to."""
+    place); returns the scene light the scene-light terms hold the fit to (a card's reading corrected for how it
+    faces: :func:`facing_illuminant`)."""
+    regions, pixels = face_skin(face, frames_srgb, classifier)
+    illuminant = facing_illuminant(illuminant, pixels, config.tone.illuminant, log)
     white, scene = illuminant.white, face.scene
     with torch.no_grad():
         scene.lights.copy_(lights_scaled_to_white(scene.lights, white))
-    regions, pixels = face_skin(face, frames_srgb, classifier)
     kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= MIN_PIXELS else None
     if config.tone.free_tone:
         _start_tone(face, pixels, white, config, log)
     return SceneLight(illuminant, kept)
+
+
+def facing_illuminant(illuminant: IlluminantEstimate, pixels: SkinPixels, settings, log) -> IlluminantEstimate:
+    """A card's or checker's reading (``settings.reference_facing`` "camera"), or the scene's (white patch, grey
+    world; ``settings.scene_facing``), corrected for facing the camera (:func:`facing_camera_ratio`), said in the
+    log; any other estimate as it is."""
+    card = illuminant.source in CARD_SOURCES
+    if (card and settings.reference_facing != "camera") or (not card and (
+            not settings.scene_facing or illuminant.scene_reading is None)):
+        return illuminant
+    ratio = facing_camera_ratio(pixels, illuminant.white)
+    if ratio is None:
+        log.info(f"the {illuminant.source}'s reading is used as it is: the face shows no key light to correct it for "
+                 "facing the camera")
+        return illuminant
+    corrected = illuminant.facing_corrected(ratio)
+    log.info(f"white level from {corrected.detail}: {np.round(corrected.white, 3).tolist()}")
+    return corrected
 
 
 def _start_tone(face, pixels: SkinPixels, white: np.ndarray, config, log) -> None:

@@ -14,8 +14,9 @@ Steps:
    (coarse to fine). All in float32 on the landmark points only: the model is restricted once to the
    N correspondence points (exact, the model is linear), so a step costs O(T * N * (Ki + Ke)).
 
-Camera: :class:`deface.render.camera.Camera` (OpenCV convention, principal point at the image centre,
-axis-angle rotation model -> camera); a frontal upright face has rotation close to (pi, 0, 0).
+Camera: :class:`deface.render.camera.Camera` (OpenCV convention, principal point at the image centre unless
+given, e.g. the photo's centre seen from a crop around the face; axis-angle rotation model -> camera); a
+frontal upright face has rotation close to (pi, 0, 0).
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ class Stage1Result:
     )  # [T] fitted 3D outer-eye-corner distance * focal / depth: IOD without yaw shrink
     image_size: tuple[int, int]  # (W, H)
     loss_history: np.ndarray  # [iterations] total loss per step
+    principal_point: tuple[float, float] | None = None  # (x, y) pixels; None: the image centre
 
     @property
     def error_iod(self) -> np.ndarray:
@@ -78,26 +80,33 @@ class Stage1Result:
             translation=torch.as_tensor(self.translation[frame], dtype=torch.float32),
             width=width,
             height=height,
+            principal_point=self.principal_point,
         )
 
 
+def principal(size: tuple[int, int], principal_point: tuple[float, float] | None) -> tuple[float, float]:
+    """(x, y) of the principal point of a (W, H) image: ``principal_point``, or the image centre when None."""
+    return (size[0] / 2, size[1] / 2) if principal_point is None else principal_point
+
+
 def project_points(
-    points: torch.Tensor, rotation: torch.Tensor, translation: torch.Tensor, focal: torch.Tensor, size
+    points: torch.Tensor, rotation: torch.Tensor, translation: torch.Tensor, focal: torch.Tensor, size,
+    principal_point: tuple[float, float] | None = None,
 ) -> torch.Tensor:
     """Batched :meth:`Camera.project`: points [T, N, 3], rotation [T, 3], translation [T, 3] -> [T, N, 2]."""
-    width, height = size
     cam = torch.einsum("tij,tnj->tni", axis_angle_to_matrix(rotation), points) + translation[:, None]
-    centre = torch.tensor([width / 2, height / 2], dtype=points.dtype)
+    centre = torch.tensor(principal(size, principal_point), dtype=points.dtype)
     return focal * cam[..., :2] / cam[..., 2:].clamp_min(1e-6) + centre
 
 
-def initial_pose(model_points: np.ndarray, image_points: np.ndarray, focal: float, size) -> tuple:
+def initial_pose(model_points: np.ndarray, image_points: np.ndarray, focal: float, size,
+                 principal_point: tuple[float, float] | None = None) -> tuple:
     """solvePnP of [N, 3] model points to [N, 2] pixels -> (rotation [3], translation [3]) or a frontal
     guess (face centred, distance from the landmark spread) when PnP fails or puts the face behind."""
     import cv2
 
-    width, height = size
-    matrix = np.array([[focal, 0, width / 2], [0, focal, height / 2], [0, 0, 1]], np.float64)
+    cx, cy = principal(size, principal_point)
+    matrix = np.array([[focal, 0, cx], [0, focal, cy], [0, 0, 1]], np.float64)
     obj, img = model_points.astype(np.float64), image_points.astype(np.float64)
     ok, rvec, tvec = cv2.solvePnP(obj, img, matrix, None, flags=cv2.SOLVEPNP_EPNP)
     if ok:
@@ -108,7 +117,7 @@ def initial_pose(model_points: np.ndarray, image_points: np.ndarray, focal: floa
     spread_model = np.linalg.norm(obj - obj.mean(0), axis=1).mean()
     spread_image = np.linalg.norm(img - img.mean(0), axis=1).mean()
     depth = focal * spread_model / max(spread_image, 1e-6)
-    centre = (img.mean(0) - [width / 2, height / 2]) * depth / focal
+    centre = (img.mean(0) - [cx, cy]) * depth / focal
     translation = np.array([centre[0], centre[1], depth]) - obj.mean(0) * [1, -1, -1]
     return np.array([math.pi, 0.0, 0.0]), translation
 
@@ -120,11 +129,16 @@ def fit_landmarks(
     image_size: tuple[int, int],
     config: Stage1Config | None = None,
     iterations: int = 300,
+    principal_point: tuple[float, float] | None = None,
+    photo_side: float | None = None,
 ) -> Stage1Result:
     """Fit pose, focal, identity and expression to the landmarks of T frames (T = 1 for a photo).
 
     detections: one :class:`Landmarks` per frame (drop frames without a face beforehand);
-    image_size: (W, H) of the images the landmark pixels refer to; ``iterations`` Adam steps in all.
+    image_size: (W, H) of the images the landmark pixels refer to; ``iterations`` Adam steps in all;
+    principal_point: (x, y) in those pixels (None: the image centre); photo_side: the longest side of the
+    whole photo in those pixels, which ``initial_fov_degrees`` spans (None: max(W, H); a crop of the photo
+    gives the photo's, so the initial focal length does not depend on the crop).
     """
     config = config or Stage1Config()
     if not detections or any(d is None for d in detections):
@@ -133,7 +147,7 @@ def fit_landmarks(
     if not 0 <= rigid <= iterations:
         raise ValueError(f"stage1.rigid_iterations ({rigid}) must be within the stage's {iterations} iterations")
     with _single_thread():
-        problem = _Problem(model, corr, detections, image_size, config, iterations)
+        problem = _Problem(model, corr, detections, image_size, config, iterations, principal_point, photo_side)
         history = problem.run()
         return problem.result(history)
 
@@ -153,8 +167,11 @@ def _single_thread():
 class _Problem:
     """Parameters, targets and the loss of one Stage-1 fit."""
 
-    def __init__(self, model, corr, detections, size, config: Stage1Config, iterations: int):
+    def __init__(self, model, corr, detections, size, config: Stage1Config, iterations: int,
+                 principal_point: tuple[float, float] | None, photo_side: float | None):
         self.config, self.size, self.iterations = config, (int(size[0]), int(size[1])), iterations
+        self.principal_point = principal_point
+        self.photo_side = float(max(self.size) if photo_side is None else photo_side)
         self.blendshapes = model.expression_prior == "blendshape"
         mean, id_basis, ex_basis = landmark_basis(model, corr)
         self.mean = torch.as_tensor(mean)  # [N, 3]
@@ -178,8 +195,9 @@ class _Problem:
 
     def _init_parameters(self, model: FaceModel, mean: np.ndarray) -> None:
         frames = len(self.targets)
-        focal = 0.5 * max(self.size) / math.tan(math.radians(self.config.initial_fov_degrees) / 2)
-        poses = [initial_pose(mean, target.numpy(), focal, self.size) for target in self.targets]
+        focal = 0.5 * self.photo_side / math.tan(math.radians(self.config.initial_fov_degrees) / 2)
+        poses = [initial_pose(mean, target.numpy(), focal, self.size, self.principal_point)
+                 for target in self.targets]
         self.focal0 = focal
         self.depth0 = float(np.mean([t[2] for _, t in poses]))
         self.rotation = torch.tensor(np.stack([r for r, _ in poses]), dtype=torch.float32, requires_grad=True)
@@ -200,7 +218,8 @@ class _Problem:
     def project(self) -> torch.Tensor:
         """Model landmarks projected with the current parameters [T, N, 2]."""
         focal = self.focal0 * torch.exp(self.log_focal)
-        return project_points(self.points(), self.rotation, self.translation * self.depth0, focal, self.size)
+        return project_points(self.points(), self.rotation, self.translation * self.depth0, focal, self.size,
+                              self.principal_point)
 
     def loss(self) -> torch.Tensor:
         config = self.config
@@ -277,4 +296,5 @@ class _Problem:
             iod_frontal_px=self._iod_frontal(focal),
             image_size=self.size,
             loss_history=history,
+            principal_point=self.principal_point,
         )

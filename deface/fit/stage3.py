@@ -92,7 +92,7 @@ def texture_gates(context: StageContext, views: list[TexelView], size: int) -> l
 def initial_textures(context: StageContext) -> Textures:
     """T^0 at the output resolution from the fitted albedo coefficients."""
     with torch.no_grad():
-        return context.albedo_textures(context.config.texture_size)
+        return context.albedo_textures(context.texture_size)
 
 
 @dataclass(frozen=True)
@@ -200,8 +200,7 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
     geometry = context.geometry(frame)
     geometry = FrameGeometry(
         mesh=Mesh(geometry.mesh.vertices.detach(), *_topology(context)),
-        camera=Camera(geometry.camera.focal.detach(), geometry.camera.rotation.detach(),
-                      geometry.camera.translation.detach(), geometry.camera.width, geometry.camera.height),
+        camera=geometry.camera.detached(),
     )
     camera = supersampled_camera(geometry.camera, context.config.render.supersampling)
     fragments = context.renderer.rasterize(geometry.mesh, camera)

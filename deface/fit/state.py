@@ -90,13 +90,18 @@ class PosedFace:
     size: tuple[int, int]  # (W, H) of the frames it is drawn at (the working resolution but in
     # stage 2's half-size steps, deface/fit/coarse.py)
     pixel_scale: float = 1.0  # those frames' pixels per working pixel (scales the focal length)
+    principal_point: tuple[float, float] | None = None  # (x, y) in those frames' pixels: the photo's centre
+    # as a crop around the face sees it (deface/fit/framing.py); None: the frames' centre
 
     @classmethod
-    def create(cls, model: FaceModel, scene: SceneParameters, config: FitConfig, size: tuple[int, int]):
-        return cls(model, scene, topology_tensors(model), Renderer(FitTarget.render_config(config)), size)
+    def create(cls, model: FaceModel, scene: SceneParameters, config: FitConfig, target: FitTarget):
+        """The face drawn at ``target``'s working frames (their size and the photo's principal point)."""
+        return cls(model, scene, topology_tensors(model), Renderer(FitTarget.render_config(config)), target.size,
+                   principal_point=target.principal_point)
 
     def geometry(self, frame: int) -> FrameGeometry:
-        return frame_geometry(self.model, self.scene, self.topology, frame, self.size, self.pixel_scale)
+        return frame_geometry(self.model, self.scene, self.topology, frame, self.size, self.pixel_scale,
+                              self.principal_point)
 
     def fragments(self, frame: int) -> tuple[FrameGeometry, Fragments]:
         """The frame's geometry and what covers each working pixel."""
@@ -132,12 +137,17 @@ class StageContext:
     config: FitConfig
     log: FitLog
     shadow_caches: tuple[ShadowTransferCache, ...]  # one per frame
+    texture_size: int  # side of stage 3's UV maps: config.texture_size, or what the face's pixels support
 
     @classmethod
     def create(cls, inputs: FitInputs, face: PosedFace, decoupling: Decoupling, config: FitConfig,
-               log: FitLog) -> StageContext:
+               log: FitLog, texture_size: int | None = None) -> StageContext:
+        """The context of ``inputs``; ``texture_size`` defaults to ``config.texture_size``."""
         caches = tuple(ShadowTransferCache(face.renderer) for _ in range(inputs.num_frames))
-        return cls(inputs, face, decoupling, config, log, caches)
+        size = texture_size or config.texture_size
+        if size is None:
+            raise ValueError("StageContext: config.texture_size is None (from the face) and no size was given")
+        return cls(inputs, face, decoupling, config, log, caches, size)
 
     @property
     def model(self) -> FaceModel:

@@ -62,6 +62,18 @@ def load_image(path: str | os.PathLike, max_side: int | None = None) -> np.ndarr
     return array
 
 
+def image_size(path: str | os.PathLike) -> tuple[int, int]:
+    """(width, height) of an image file as :func:`load_image` orients it (EXIF), before any shrinking, without
+    decoding its pixels. InputError (one line) when the file cannot be read."""
+    try:
+        with Image.open(path) as img:
+            width, height = img.size
+            transposed = img.getexif().get(0x0112) in (5, 6, 7, 8)  # EXIF orientations that swap the axes
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as err:
+        raise InputError(f"{path}: cannot read image ({one_line(err)})") from err
+    return (height, width) if transposed else (width, height)
+
+
 def _check_pixels(path: Path, img: Image.Image) -> None:
     width, height = img.size
     if width < 1 or height < 1 or width * height > MAX_PIXELS:

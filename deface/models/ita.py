@@ -86,8 +86,8 @@ def texture_ita(diffuse_srgb: np.ndarray) -> float:
 
 
 def texture_tone(diffuse_linear: np.ndarray, level_sigma: float | None) -> dict:
-    """The tone of a diffuse map [H, W, 3] (linear RGB): its ITA, and the ITA interval that the white level's
-    one-sigma spread ``level_sigma`` (natural log; None when no white level was estimated) allows.
+    """The tone of a diffuse map [H, W, 3] (linear RGB): its ITA, and the ITA intervals that the white level's
+    one- and two-sigma spreads (``level_sigma``, natural log; None when no white level was estimated) allow.
 
     A fit holds its brightest light to the white level W, so the map's level is the photo's over W: W brighter by
     exp(sigma) makes every texel exp(-sigma) as light (the map's colour stays). The interval is the ITA of the
@@ -95,11 +95,13 @@ def texture_tone(diffuse_linear: np.ndarray, level_sigma: float | None) -> dict:
     how the skin was read (docs/skin-tone.md)."""
     linear = np.clip(np.asarray(diffuse_linear, dtype=np.float64), 0.0, 1.0)
     texels = linear[texture_tone_mask(*linear.shape[:2])]
-    record = {"texture_ita": round(ita_of_srgb(linear_to_srgb(texels)), 2), "ita_interval": None}
+    record = {"texture_ita": round(ita_of_srgb(linear_to_srgb(texels)), 2), "ita_interval": None,
+              "ita_interval_2sigma": None}
     if level_sigma is not None:
-        darker, lighter = (ita_of_srgb(linear_to_srgb(np.clip(texels * np.exp(s), 0.0, 1.0)))
-                           for s in (-level_sigma, level_sigma))
-        record["ita_interval"] = [round(darker, 2), round(lighter, 2)]
+        for key, sigma in (("ita_interval", level_sigma), ("ita_interval_2sigma", 2 * level_sigma)):
+            darker, lighter = (ita_of_srgb(linear_to_srgb(np.clip(texels * np.exp(s), 0.0, 1.0)))
+                               for s in (-sigma, sigma))
+            record[key] = [round(darker, 2), round(lighter, 2)]
     return record
 
 

@@ -39,7 +39,8 @@ When the user knows the light, the estimate steps aside (:func:`known_illuminant
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 from scipy import ndimage
@@ -102,27 +103,65 @@ class IlluminantConfig:
     in params.json) for every photo taken under the same light. Used instead of the estimate."""
     reference_box: tuple[float, float, float, float] | None = None
     """Left, top, right, bottom of a grey or white card, or any flat matte surface of known reflectance, in the
-    photo, as fractions of its width and height (a card at pixels 300-420 across and 900-1000 down a 1200 x 1600
-    photo: 0.25,0.5625,0.35,0.625; in every frame of a clip: a fixed camera). W is its median linear colour over
-    ``reference_reflectance``, used instead of the estimate. Held at the face and facing the camera it sees the
-    key light at the camera's angle, a little less than a surface facing the light (cos 30 degrees = 0.87), so
-    the skin comes out that much lighter."""
+    photo (``deface fit --card``): as fractions of its width and height when every value is at most 1 (a card at
+    pixels 300-420 across and 900-1000 down a 1200 x 1600 photo: 0.25,0.5625,0.35,0.625), else as pixels of the
+    input image (300,900,420,1000); in every frame of a clip (a fixed camera). W is its median linear colour over
+    ``reference_reflectance``, corrected for how the card faces (``reference_facing``), used instead of the
+    estimate."""
     reference_reflectance: float = 0.18
-    """Reflectance of the reference surface: 0.18 for a photographic grey card, about 0.9 for white paper."""
+    """Reflectance of the reference surface: 0.18 for a photographic grey card, about 0.9 for white paper
+    (``deface fit --card-reflectance``)."""
+    reference_sigma: float = 0.15
+    """Log spread of a card's or colour checker's level once corrected for how it faces: what is left of where it
+    was held (a little below or beside the face, a little nearer or farther from the light) and of the face's
+    lights that correct it. On the truth set's tune renders (benchmarks/tone_truth.py, studio and tungsten) the
+    corrected card's level lies 0.06-0.2 below the key light's on the face (0.43 where the photo clipped the face),
+    RMS 0.15. It sets the tone's interval for a card as ``level_sigma`` does for an estimate."""
+    reference_facing: Literal["camera", "light"] = "camera"
+    """How the card (or colour checker) was held. "camera": beside the face, facing the camera, as people hold
+    one: it then receives the light a surface facing the camera gets, less than the skin facing the key light
+    (on renders with the key 40-55 degrees off the camera: 15-30 % less), and W is its reading times the ratio of
+    the skin's key-light envelope at the 90th percentile to the envelope at the camera's direction (the lights
+    read off the face, deface/fit/scene_light.py; docs/skin-tone.md). "light": turned towards the key light; no
+    correction."""
+    scene_facing: bool = False
+    """The scene's reading (a white patch's or the grey world's level) is of surfaces that mostly face the camera (a
+    wall, a backdrop, a shirt), which get less of a key light off the camera's axis than the skin facing it, as a
+    card held facing the camera does: correct the reading by the same ratio from the face's lights before it is
+    combined with the photo's white point. Off by default: measured (tone starts, docs/skin-tone.md) it lowers the
+    lightening where the backdrop is mid-grey (../shared/data/skin-tone-synth MAE 9.7 -> 7.3; the truth set's tune
+    part mean signed +15.1 -> +11.9, MAE 27.4 -> 27.9) but darkens further where a pale backdrop already made W too
+    bright (its report part MAE 15.9 -> 19.9, mean signed -12.9 -> -18.4; photos unchanged, 9.6): the grey world's
+    own premise (18 %) is the larger error, and this correction does not fix it."""
+    checker: Literal["auto", "on", "off"] = "auto"
+    """Look for an X-Rite ColorChecker (Classic, Passport, Nano or SG) in the photo (deface/priors/checker.py,
+    the ``checker`` extra: colour-checker-detection): its grey patches of known reflectance give W, corrected for
+    its orientation as a card is. "auto": when the package is installed (the log says when it is not), and only
+    a detection whose six grey patches read as a neutral ramp of the known reflectances counts; "on": an error
+    when the package is missing or no checker is found; "off": never."""
 
     def __post_init__(self) -> None:
         if self.white is not None and min(self.white) <= 0:
             raise ValueError(f"tone.illuminant.white must be positive in every channel, got {self.white}")
         if self.reference_box is not None:
             left, top, right, bottom = self.reference_box
-            if not (0.0 <= left < right <= 1.0 and 0.0 <= top < bottom <= 1.0):
-                raise ValueError("tone.illuminant.reference_box is left,top,right,bottom as fractions of the image "
-                                 f"(0 <= left < right <= 1, 0 <= top < bottom <= 1), got {self.reference_box}")
+            if not (0.0 <= left < right and 0.0 <= top < bottom) or (
+                    max(self.reference_box) <= 1.0 and not (right <= 1.0 and bottom <= 1.0)):
+                raise ValueError("tone.illuminant.reference_box (--card) is left,top,right,bottom, as fractions of "
+                                 "the image (0 <= left < right <= 1, 0 <= top < bottom <= 1) or as pixels, got "
+                                 f"{','.join(f'{v:g}' for v in self.reference_box)}")
             if self.white is not None:
-                raise ValueError("give tone.illuminant.white or tone.illuminant.reference_box, not both")
+                raise ValueError("give the white level (--white, tone.illuminant.white) or a card (--card, "
+                                 "tone.illuminant.reference_box), not both")
+        if not 0.0 <= self.reference_sigma <= 2.0:
+            raise ValueError(f"tone.illuminant.reference_sigma must be in [0, 2], got {self.reference_sigma}")
         if not 0.0 < self.reference_reflectance <= 1.0:
             raise ValueError("tone.illuminant.reference_reflectance must be in (0, 1], "
                              f"got {self.reference_reflectance}")
+
+
+CARD_SOURCES = ("reference card", "colour checker")
+"""Sources whose reading is of a surface in the photo held at the face, corrected for how it faces."""
 
 
 @dataclass(frozen=True)
@@ -131,15 +170,34 @@ class IlluminantEstimate:
 
     white: np.ndarray  # [3] linear RGB a white surface facing the key light shows
     cct: float  # correlated colour temperature (K) of the light
-    source: str  # "white patch", "grey world", "fallback", "given" or "reference card"
+    source: str  # "white patch", "grey world", "fallback", "given", "reference card" or "colour checker"
     colour_weight: float  # in [0, 1]: how much of the colour came from the scene (the rest: the white point)
     scene_pixels: int  # usable pixels outside the face
     level_sigma: float = 0.0  # natural-log spread of W's level: the estimate's one sigma (0: the user's W)
+    orientation: float = 1.0  # a card's reading was multiplied by this for facing the camera (1: not corrected)
+    detail: str = ""  # where the level came from, in words (the log and report.html say it)
+    scene_reading: tuple[float, float, float] | None = None  # the scene's level, its log sigma and exposure_sigma
+    # before the two were combined (white patch, grey world), so a facing correction can combine them again
 
     def record(self) -> dict:
         return {"white": [round(float(v), 5) for v in self.white], "cct": round(self.cct, 1),
                 "source": self.source, "colour_weight": round(self.colour_weight, 4),
-                "scene_pixels": self.scene_pixels, "level_sigma": round(self.level_sigma, 4)}
+                "scene_pixels": self.scene_pixels, "level_sigma": round(self.level_sigma, 4),
+                "orientation": round(self.orientation, 4), "detail": self.detail}
+
+    def facing_corrected(self, ratio: float) -> IlluminantEstimate:
+        """A card's reading, or the scene's before it is combined with the photo's white point, times ``ratio``:
+        the light a surface facing the key light gets over what one facing the camera gets. Any other estimate
+        (given, the fallback) as it is."""
+        detail = f"{self.detail}; x{ratio:.2f} for facing the camera rather than the key light"
+        if self.source in CARD_SOURCES:
+            return replace(self, white=self.white * ratio, orientation=self.orientation * ratio, detail=detail)
+        if self.scene_reading is None:
+            return self
+        level, sigma, exposure_sigma = self.scene_reading
+        combined, _ = _with_exposure_prior(level * ratio, sigma, exposure_sigma)
+        white = self.white / float(self.white @ LUMINANCE) * combined
+        return replace(self, white=white, orientation=self.orientation * ratio, detail=detail)
 
 
 def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarray],
@@ -151,7 +209,7 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
     usable = _readable(pixels, linear, config)
     if usable.sum() < config.min_scene_fraction * total:
         return IlluminantEstimate(np.ones(3), config.neutral_cct, "fallback", 0.0, int(usable.sum()),
-                                  config.exposure_sigma)
+                                  config.exposure_sigma, detail="the photo's white point (too little scene to read)")
     grey_sigma = grey_world_spread(usable, config)
     patch = _white_patch(pixels, linear, grey_sigma, config)
     if patch is not None:
@@ -161,27 +219,52 @@ def estimate_illuminant(frames_srgb: list[np.ndarray], face_masks: list[np.ndarr
         colour, level = grey_world(linear[usable], config)
         sigma, source = grey_sigma, "grey world"
     cct, weight = plausible_cct(colour, config)
-    level, level_sigma = _with_exposure_prior(level, sigma, config.exposure_sigma)
-    return IlluminantEstimate(level * planckian_rgb(cct, config.neutral_cct), cct, source, weight,
-                              int(usable.sum()), level_sigma)
+    combined, level_sigma = _with_exposure_prior(level, sigma, config.exposure_sigma)
+    detail = (f"the scene's {source} (level {level:.2f}, log sigma {sigma:.2f}) with the photo's white point "
+              f"(log sigma {config.exposure_sigma:.2f})")
+    return IlluminantEstimate(combined * planckian_rgb(cct, config.neutral_cct), cct, source, weight,
+                              int(usable.sum()), level_sigma, detail=detail,
+                              scene_reading=(level, sigma, config.exposure_sigma))
 
 
-def known_illuminant(frames_srgb: list[np.ndarray], config: IlluminantConfig) -> IlluminantEstimate | None:
-    """W as given (``white``) or read off a reference card (``reference_box``) in frames [H, W, 3] sRGB, or None
-    when neither is set. ValueError (one line) when the box shows too little of the card to read."""
+def known_illuminant(frames_srgb: list[np.ndarray], config: IlluminantConfig,
+                     scale: float = 1.0) -> IlluminantEstimate | None:
+    """W as given (``white``) or read off a reference card (``reference_box``) in frames [H, W, 3] sRGB (the
+    working frames, ``scale`` times the input's size: a box in pixels is of the input image), or None when
+    neither is set. ValueError (one line) when the box shows too little of the card to read. The card's reading
+    is not yet corrected for how it faces (:meth:`IlluminantEstimate.facing_corrected`, from the face's lights)."""
     if config.white is not None:
         white = np.asarray(config.white, dtype=np.float64)
-        return IlluminantEstimate(white, _cct(white, config), "given", 1.0, 0)
+        return IlluminantEstimate(white, cct_of(white, config), "given", 1.0, 0, detail="given (tone.illuminant.white)")
     if config.reference_box is None:
         return None
-    pixels = np.concatenate([_box(frame, config.reference_box).reshape(-1, 3) for frame in frames_srgb])
+    box = _fractions(config.reference_box, frames_srgb[0].shape, scale)
+    shown = ",".join(f"{v:g}" for v in config.reference_box)
+    pixels = np.concatenate([_box(frame, box).reshape(-1, 3) for frame in frames_srgb])
     linear = srgb_to_linear(pixels)
     usable = _readable(pixels, linear, config)
     if usable.mean() < 0.5:
-        raise ValueError(f"tone.illuminant.reference_box {list(config.reference_box)}: {100 * (1 - usable.mean()):.0f} "
-                         "% of it is clipped or nearly black; choose a part of the card that is neither")
+        raise ValueError(f"the card's box {shown} (--card, tone.illuminant.reference_box): "
+                         f"{100 * (1 - usable.mean()):.0f} % of it is clipped or nearly black; choose a part of the "
+                         "card that is neither, or expose the photo so the card is not blown out")
     white = np.median(linear[usable], axis=0).astype(np.float64) / config.reference_reflectance
-    return IlluminantEstimate(white, _cct(white, config), "reference card", 1.0, int(usable.sum()))
+    detail = f"a card of {100 * config.reference_reflectance:.0f} % reflectance at {shown}"
+    return IlluminantEstimate(white, cct_of(white, config), "reference card", 1.0, int(usable.sum()),
+                              config.reference_sigma, detail=detail)
+
+
+def _fractions(box: tuple[float, float, float, float], shape: tuple[int, ...],
+               scale: float) -> tuple[float, float, float, float]:
+    """``box`` as fractions of the image: as it is when every value is at most 1, else pixels of the input image
+    (the working frame of ``shape`` is ``scale`` times its size). ValueError when the pixels lie outside it."""
+    if max(box) <= 1.0:
+        return box
+    width, height = shape[1] / scale, shape[0] / scale
+    left, top, right, bottom = box
+    if right > width + 0.5 or bottom > height + 0.5:
+        raise ValueError(f"the card's box {','.join(f'{v:g}' for v in box)} (--card, pixels) reaches beyond the "
+                         f"{round(width)} x {round(height)} image")
+    return left / width, top / height, min(right / width, 1.0), min(bottom / height, 1.0)
 
 
 def _readable(pixels: np.ndarray, linear: np.ndarray, config: IlluminantConfig) -> np.ndarray:
@@ -257,7 +340,7 @@ def plausible_cct(linear_rgb: np.ndarray, config: IlluminantConfig) -> tuple[flo
     return 1e6 / mired, weight
 
 
-def _cct(linear_rgb: np.ndarray, config: IlluminantConfig) -> float:
+def cct_of(linear_rgb: np.ndarray, config: IlluminantConfig) -> float:
     """The colour temperature (K, within ``cct_range``) nearest a light of colour ``linear_rgb`` [3]."""
     return float(np.clip(_cct_duv(linear_rgb, config)[0], *config.cct_range))
 

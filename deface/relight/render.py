@@ -20,13 +20,14 @@ def face_rgba(rendered: FrameRender) -> np.ndarray:
 
 
 def write_renders(fit: FitOutput, renders: list[FrameRender], folder: Path, lights: torch.Tensor | None = None) -> None:
-    """``render.png`` (the face where M_o says so, the photo elsewhere) and ``render_face.png`` (RGBA) per
-    frame (a clip's under ``frames/<i>/``), and the SH lights used as ``lights.npy`` [K, B*B, 3]."""
+    """``render.png`` (the face where M_o says so, the whole photo elsewhere, as the fit's) and
+    ``render_face.png`` (RGBA, the working frame: the crop around the face) per frame (a clip's under
+    ``frames/<i>/``), and the SH lights used as ``lights.npy`` [K, B*B, 3]."""
     from PIL import Image
 
     for frame, rendered in enumerate(renders):
         base = folder if len(renders) == 1 else folder / "frames" / f"{frame:03d}"
-        save_png(base / "render.png", fit.composite(rendered, frame).numpy())
+        save_png(base / "render.png", fit.composite_photo(rendered, frame).numpy())
         Image.fromarray(face_rgba(rendered)).save(base / "render_face.png")
     if lights is not None:
         np.save(folder / "lights.npy", lights.numpy())

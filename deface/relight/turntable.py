@@ -31,9 +31,10 @@ def turned_camera(camera: Camera, centre: torch.Tensor, degrees: float, scale: f
     combined = rotation @ turn
     centre = centre.double().numpy()
     translation = camera.translation.detach().double().numpy() + rotation @ centre - combined @ centre
-    return Camera(torch.tensor(float(camera.focal) * scale), torch.as_tensor(Rotation.from_matrix(combined).as_rotvec(),
-                  dtype=torch.float32), torch.as_tensor(translation, dtype=torch.float32),
-                  round(camera.width * scale), round(camera.height * scale))
+    turned = Camera(camera.focal.detach().clone(), torch.as_tensor(Rotation.from_matrix(combined).as_rotvec(),
+                    dtype=torch.float32), torch.as_tensor(translation, dtype=torch.float32), camera.width,
+                    camera.height, camera.principal_point)
+    return turned.scaled(scale)
 
 
 def turntable_frames(fit: FitOutput, lights: torch.Tensor, yaw_range: float = 90.0, count: int = 36,

@@ -1,5 +1,8 @@
 """Pinhole camera, OpenCV convention: camera x right, y down, z forward (into the scene); pixels (x right,
-y down) with the principal point at the image centre. Pixel centres sit at integer + 0.5.
+y down). Pixel centres sit at integer + 0.5. The principal point (where the optical axis meets the image) is
+the image centre unless the camera says otherwise: a crop of a photo keeps the photo's principal point, which
+then lies off the crop's centre (:meth:`Camera.window`; the fit works on a crop around the face,
+deface/fit/framing.py).
 
 Model frame of the face models: +y up, +z toward the viewer, so a frontal camera has rotation
 axis-angle (pi, 0, 0) (see :meth:`Camera.frontal`).
@@ -33,7 +36,8 @@ def axis_angle_to_matrix(axis_angle: torch.Tensor) -> torch.Tensor:
 class Camera:
     """A pinhole camera looking at model-frame points.
 
-    focal: [] focal length in pixels; rotation: [3] axis-angle, model -> camera; translation: [3] cm.
+    focal: [] focal length in pixels; rotation: [3] axis-angle, model -> camera; translation: [3] cm;
+    principal_point: (x, y) pixels, None for the image centre (width / 2, height / 2).
     """
 
     focal: torch.Tensor
@@ -41,6 +45,8 @@ class Camera:
     translation: torch.Tensor
     width: int
     height: int
+    principal_point: tuple[float, float] | None = None
+    """Where the optical axis meets the image, pixels (x right, y down); None: the image centre."""
     _matrix: torch.Tensor | None = field(default=None, init=False, repr=False, compare=False)
     """The rotation matrix computed once by ``resolved`` (None: computed on each use)."""
 
@@ -67,6 +73,34 @@ class Camera:
         )
 
     @property
+    def principal(self) -> tuple[float, float]:
+        """(x, y) pixels of the principal point (the image centre unless ``principal_point`` is given)."""
+        if self.principal_point is None:
+            return self.width / 2, self.height / 2
+        return float(self.principal_point[0]), float(self.principal_point[1])
+
+    def scaled(self, factor: float, width: int | None = None, height: int | None = None) -> Camera:
+        """The same view on a pixel grid ``factor`` x finer (pixel edges kept: position x -> factor x), of
+        ``width`` x ``height`` pixels (default: the sizes times ``factor``, rounded). A camera centred on its
+        image stays centred on the new one."""
+        principal = None if self.principal_point is None else tuple(p * factor for p in self.principal_point)
+        return Camera(self.focal * factor, self.rotation, self.translation,
+                      round(self.width * factor) if width is None else width,
+                      round(self.height * factor) if height is None else height, principal)
+
+    def window(self, left: float, top: float, width: int, height: int) -> Camera:
+        """The same view seen through a ``width`` x ``height`` window of the image whose top-left corner is
+        at pixel position (``left``, ``top``) (negative, or beyond the image, for a larger window): positions
+        shift by (-left, -top), the principal point with them."""
+        cx, cy = self.principal
+        return Camera(self.focal, self.rotation, self.translation, width, height, (cx - left, cy - top))
+
+    def detached(self) -> Camera:
+        """This camera with its tensors detached from the autograd graph."""
+        return Camera(self.focal.detach(), self.rotation.detach(), self.translation.detach(), self.width,
+                      self.height, self.principal_point)
+
+    @property
     def rotation_matrix(self) -> torch.Tensor:  # [3, 3]
         return axis_angle_to_matrix(self.rotation) if self._matrix is None else self._matrix
 
@@ -78,7 +112,7 @@ class Camera:
         """Model-frame points [..., 3] -> (pixels [..., 2] (x right, y down), depth [...] along +z)."""
         cam = self.to_camera(points)
         depth = cam[..., 2]
-        centre = torch.tensor([self.width / 2, self.height / 2], dtype=cam.dtype, device=cam.device)
+        centre = torch.tensor(self.principal, dtype=cam.dtype, device=cam.device)
         pixels = self.focal * cam[..., :2] / depth[..., None].clamp_min(1e-6) + centre
         return pixels, depth
 

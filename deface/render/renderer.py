@@ -391,7 +391,7 @@ def _pixel_rays(camera: Camera, flat: np.ndarray) -> tuple[np.ndarray, np.ndarra
     focal = float(camera.focal.detach())
     rot = camera.rotation_matrix.detach().cpu().numpy().astype(np.float32)
     origin = camera.center_in_model().detach().cpu().numpy().astype(np.float32)
-    dirs = kernels.pixel_directions(flat, (camera.height, camera.width), focal, rot)
+    dirs = kernels.pixel_directions(flat, (camera.height, camera.width), focal, camera.principal, rot)
     return np.broadcast_to(origin, dirs.shape), dirs
 
 

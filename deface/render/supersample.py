@@ -26,8 +26,7 @@ def supersampled_camera(camera: Camera, factor: int) -> Camera:
         raise ValueError(f"supersampling factor must be >= 1, got {factor}")
     if factor == 1:
         return camera
-    return Camera(camera.focal * factor, camera.rotation, camera.translation,
-                  camera.width * factor, camera.height * factor)
+    return camera.scaled(factor, camera.width * factor, camera.height * factor)
 
 
 def shade_supersampled(renderer: Renderer, mesh: Mesh, camera: Camera, fragments: Fragments, textures: Textures,

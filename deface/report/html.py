@@ -80,7 +80,7 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
         f'height="{SPHERE_SIZE}"><figcaption>light {k}: sphere and mask M_L</figcaption></figure>' for k in fit.kept)
     body = f"""<h1>deface fit {html.escape(name)}</h1>
 <h2>Input and result</h2>
-<div class="row">{_figure(f"{REPORT_DIR}/input.png", "input (working resolution)")}
+<div class="row">{_figure(f"{REPORT_DIR}/input.png", "input: the working image (the crop around the face)")}
 {_figure(f"{base}render.png", "I_out: the fit composited into the photo")}
 {_figure(f"{base}render_face.png", "I_R: the rendered face")}</div>
 <h2>Lights kept ({len(fit.kept)} of {fit.lights.shape[0]}) and the face region</h2>
@@ -106,10 +106,16 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
 def _diffuse_caption(fit: FitOutput) -> str:
     """The diffuse map's caption: its skin tone, and the range the unknown light level leaves open."""
     tone = fit.skin_tone()
+    illuminant = fit.illuminant or {}
+    source = illuminant.get("detail") or illuminant.get("source")
+    where = f"; light level from {source}" if source else ""
     if tone["ita_interval"] is None:
-        return f"diffuse (skin ITA {tone['texture_ita']:.0f})"
+        return f"diffuse (skin ITA {tone['texture_ita']:.0f}{where})"
     darker, lighter = tone["ita_interval"]
-    return f"diffuse (skin ITA {tone['texture_ita']:.0f}; {darker:.0f} to {lighter:.0f} for the light level)"
+    if lighter - darker < 0.5:
+        return f"diffuse (skin ITA {tone['texture_ita']:.0f}{where})"
+    return (f"diffuse (skin ITA {tone['texture_ita']:.0f}; {darker:.0f} to {lighter:.0f} for the light level"
+            f"{where})")
 
 
 def _figure(src: str, caption: str, width: int | None = None) -> str:

@@ -73,7 +73,7 @@ def texel_view(raster: UVRaster, mesh: Mesh, camera: Camera, scene: RayScene | N
     distance = to_camera.norm(dim=-1)
     facing = ((normals * to_camera).sum(-1) / distance).clamp_min(0)
     pixels, depth = camera.project(points)
-    density = _triangle_density(mesh, camera, raster.triangle.shape)[tri]
+    density = triangle_density(mesh, camera, raster.triangle.shape)[tri]
     inside = (depth > 0) & (pixels[:, 0] >= 0) & (pixels[:, 0] < camera.width)
     inside &= (pixels[:, 1] >= 0) & (pixels[:, 1] < camera.height)
     scene = scene or RayScene(vertices.float().numpy(), mesh.triangles.numpy())
@@ -103,12 +103,13 @@ def unwrap(image: np.ndarray, view: TexelView) -> np.ndarray:
 
 def _double(camera: Camera) -> Camera:
     return Camera(camera.focal.detach().double(), camera.rotation.detach().double(),
-                  camera.translation.detach().double(), camera.width, camera.height)
+                  camera.translation.detach().double(), camera.width, camera.height, camera.principal_point)
 
 
-def _triangle_density(mesh: Mesh, camera: Camera, texture_shape: tuple[int, int]) -> torch.Tensor:
-    """[F] pixels per texel of each triangle: projected area (px²) over UV area (texels²)."""
-    pixels, _ = camera.project(mesh.vertices.detach().double())
+def triangle_density(mesh: Mesh, camera: Camera, texture_shape: tuple[int, int]) -> torch.Tensor:
+    """[F] float64 pixels per texel of each triangle of an [Ht, Wt] map: projected area (px²) over UV area
+    (texels²)."""
+    pixels, _ = _double(camera).project(mesh.vertices.detach().double())
     screen = _area(pixels[mesh.triangles])
     uv = mesh.uvs.double() * torch.tensor([texture_shape[1], texture_shape[0]], dtype=torch.float64)
     texels = _area(uv[mesh.triangle_uvs])

@@ -60,10 +60,16 @@ def tone_words(tone: dict | None, illuminant: dict | None) -> str:
         return text + (" This preset does not estimate how bright the photo's light was, so the reading has no "
                        "range (the default preset gives one).")
     darker, lighter = interval
-    if lighter - darker < 1.0:
-        known = {"reference card": "the grey card marked in the photo", "given": "the white level it was given"}
-        how = known.get((illuminant or {}).get("source"), "a known light")
-        return text + f" The light's brightness came from {how}, so no unknown light level widens this reading."
+    known = {"reference card": "the grey card marked in the photo", "given": "the white level it was given",
+             "colour checker": "the colour checker found in the photo"}
+    source = (illuminant or {}).get("source")
+    if lighter - darker < 1.0 or source in known:
+        how = known.get(source, "a known light")
+        text += f" The light's brightness came from {how}, so no unknown light level widens this reading"
+        if lighter - darker < 1.0:
+            return text + "."
+        return text + (f" (where it was held leaves ITA {darker:.0f}° to {lighter:.0f}°, "
+                       f"{ita_group(darker)} to {ita_group(lighter)}).")
     text += (f" A photo does not say how bright its light was: with the light level one standard deviation "
              f"brighter or darker, the same photo reads as {ita_group(darker)} (ITA {darker:.0f}°) to "
              f"{ita_group(lighter)} ({lighter:.0f}°).")

@@ -48,13 +48,14 @@ def _triangle_box_pixels_reference(pixels: torch.Tensor, triangles: torch.Tensor
     return np.flatnonzero(paint.cumsum(0).cumsum(1)[:height, :width] > 0)
 
 
-def _pixel_directions_reference(flat: np.ndarray, size: tuple[int, int], focal: float, rotation: np.ndarray):
-    """Unit directions [N, 3] float32: camera-frame (x + 0.5 - W/2, y + 0.5 - H/2, focal) / focal, times R."""
-    height, width = size
+def _pixel_directions_reference(flat: np.ndarray, size: tuple[int, int], focal: float, centre: tuple[float, float],
+                                rotation: np.ndarray):
+    """Unit directions [N, 3] float32: camera-frame (x + 0.5 - cx, y + 0.5 - cy, focal) / focal, times R."""
+    _, width = size
     ys, xs = np.divmod(flat, width)
     dirs_cam = np.empty((xs.shape[0], 3), dtype=np.float32)
-    dirs_cam[:, 0] = (xs + 0.5 - width / 2) / focal
-    dirs_cam[:, 1] = (ys + 0.5 - height / 2) / focal
+    dirs_cam[:, 0] = (xs + 0.5 - centre[0]) / focal
+    dirs_cam[:, 1] = (ys + 0.5 - centre[1]) / focal
     dirs_cam[:, 2] = 1.0
     dirs = dirs_cam @ rotation  # camera -> model: R^T d
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
@@ -84,11 +85,14 @@ def _triangle_box_pixels_fast(pixels: torch.Tensor, triangles: torch.Tensor, hei
     return np.flatnonzero(mask)
 
 
-def _pixel_directions_fast(flat: np.ndarray, size: tuple[int, int], focal: float, rotation: np.ndarray) -> np.ndarray:
+def _pixel_directions_fast(flat: np.ndarray, size: tuple[int, int], focal: float, centre: tuple[float, float],
+                           rotation: np.ndarray) -> np.ndarray:
     """renderer._pixel_rays' unit model-frame directions [N, 3] (float32) through the centres of the pixels
-    ``flat`` (y * W + x) of an image size = (H, W), for a camera of ``focal`` (pixels) and rotation [3, 3]."""
+    ``flat`` (y * W + x) of an image size = (H, W), for a camera of ``focal`` (pixels), principal point
+    ``centre`` (x, y pixels) and rotation [3, 3]."""
     out = np.empty((flat.shape[0], 3), dtype=np.float32)
-    _pixel_directions(np.ascontiguousarray(flat, dtype=np.int64), size[0], size[1], focal, rotation, out)
+    _pixel_directions(np.ascontiguousarray(flat, dtype=np.int64), size[1], focal, float(centre[0]),
+                      float(centre[1]), rotation, out)
     return out
 
 
@@ -119,10 +123,10 @@ def _map_corners(corners, new_index, used, local):
 
 
 @njit(cache=True)
-def _pixel_directions(flat, height, width, focal, rotation, out):
+def _pixel_directions(flat, width, focal, centre_x, centre_y, rotation, out):
     for n in range(flat.shape[0]):
         y, x = flat[n] // width, flat[n] % width
-        cx, cy = (x + 0.5 - width / 2) / focal, (y + 0.5 - height / 2) / focal  # camera frame, z = 1
+        cx, cy = (x + 0.5 - centre_x) / focal, (y + 0.5 - centre_y) / focal  # camera frame, z = 1
         dx = cx * rotation[0, 0] + cy * rotation[1, 0] + rotation[2, 0]  # camera -> model: R^T d
         dy = cx * rotation[0, 1] + cy * rotation[1, 1] + rotation[2, 1]
         dz = cx * rotation[0, 2] + cy * rotation[1, 2] + rotation[2, 2]
@@ -221,7 +225,8 @@ pixel_directions = register(
     "pixel_directions",
     reference=_pixel_directions_reference,
     fast=_pixel_directions_fast,
-    supports=lambda flat, size, focal, rotation: True,
+    supports=lambda flat, size, focal, centre, rotation: True,
 )
 """Unit model-frame directions [N, 3] (float32) through the centres of the pixels ``flat`` (y * W + x) of an
-image size = (H, W), for a camera of ``focal`` (pixels, a float) and rotation [3, 3] (numpy)."""
+image size = (H, W), for a camera of ``focal`` (pixels, a float), principal point ``centre`` (x, y pixels) and
+rotation [3, 3] (numpy)."""
