@@ -10,30 +10,14 @@
 - ``nextface-star``: ``nextface`` restricted to the face region h (NextFace* of the paper).
 - ``fast``: ``deface`` with fewer iterations, a 192-px working image and 256-px textures, for previews and
   tests.
-- ``deface``: the paper's method with four changes measured on the benchmark (BENCHMARKS.md):
-  M_o = M_R h (the face-region classifier itself) instead of the distilled field g, which is trained to match
-  h but may shrink wherever the render fits badly (L_pho ignores pixels outside M_o; with the offline
-  skin-colour h that cost the texture transfer about 2 dB); the ACE threshold eps = 0.09 of the authors'
-  portrait-shadow config instead of 0.17, because a foreign shadow often covers less than 17 % of the face
-  and ACE then dropped its light; n = 3 initial lights instead of 5 (one lit, one shadowed, one spare is
-  what a cast shadow needs; more lights split the lit skin); and 4 octaves of sin/cos features
-  on f's input, without which the authors' small MLP on raw (x, y) cannot draw the sharp, thin edges of
-  blinds, fingers and leaves and the shadow is baked into the texture. ``paper`` keeps the paper's values.
-  Its stage-3 maps are pyramids gated by the photos' pixels per texel, and unseen texels are completed
-  (docs/textures.md): per-texel maps fill with colour noise where the photo does not resolve texels. The
-  diffuse map's step scales with its level (``LearningRates.stage3_diffuse_level``), so a dark skin's texels
-  are refined like a light skin's, not with several times the relative noise. Its smooth departures from T^0
-  beyond one gain per channel cost (``Weights.smooth_departure``): the photo cannot tell them from shading the
-  lights do not model, and the shadowed and clean fits of one person baked different shading into them.
-  Stage 3 holds 10 % of the face's pixels out of L_pho and keeps the step that predicts them best
-  (``Iterations.stage3_holdout``, deface/fit/holdout.py): later steps fit colour noise, not the person.
-  Stage 3 stops early once its loss has settled (``Iterations.stage3_tolerance``), and stage 2 runs its
-  first half at half size (``Iterations.stage2_coarse_share``, deface/fit/coarse.py).
-  It keeps the person's skin tone (``tone``, docs/skin-tone.md): the albedo's tone is free along a
-  flat-prior tone axis, set from the skin in the key light (stage 2 keeps it), and the lights are held to
-  the scene's illuminant. Without it the lights absorb every skin's tone and all textures come out alike (regression
-  slope of texture ITA on photo ITA 0.08). L_pho takes the photo's clipped channels as lower bounds
-  (``decouple.clipped_as_bound``): a clipped red is not less red skin.
+- ``deface``: the paper's method with the changes the benchmarks chose (each field's choice and its figures:
+  docs/design.md "Default preset", docs/textures.md, docs/skin-tone.md, BENCHMARKS.md):
+  M_o = M_R h instead of the distilled field g; ACE's eps 0.09 and n = 3 initial lights; Fourier features on
+  f's input; stage-3 maps as pyramids gated by the photos' pixels per texel, completed where unseen, stopped by
+  held-out pixels; the person's skin tone (free tone axis, lights held to the scene's illuminant); and what keeps
+  the person's dark albedo in the albedo (docs/textures.md "The person's detail"): L_lan in units of the face,
+  stage 2 weighing pixels by their shading evidence, an offline h that keeps pigment and the beard zone, and no
+  GP, LP or smooth-departure term.
 - ``deface-mean-skin``: ``deface`` before it kept the tone (the earlier default exactly, with L_pho's clipped
   channels as values again): the model's mean skin with free lights, so every
   person gets nearly the same pale texture. Its texture transfer between a shadowed and a clean photo of one
@@ -93,17 +77,17 @@ def _nextface(name: str, restrict_to_face: bool) -> FitConfig:
     )
 
 
-# Octaves of Fourier features on f's (x, y, t) in the default preset (chosen on the benchmark, BENCHMARKS.md).
+# Octaves of Fourier features on f's (x, y, t) in the default preset: sharp shadow edges (blinds, leaves) need
+# them; more octaves let the masks follow a beard (docs/design.md "Default preset").
 FOURIER_OCTAVES = 4
 
 
-# Stage 3's early stop in `deface` and `fast`: less than 0.5 % loss decrease per 20 steps (Iterations; on a
-# 256² photo the last ~80 of 200 steps lowered the loss ~1 % in all; BENCHMARKS.md "Speed").
+# Stage 3's early stop in `deface` and `fast`: less than 0.5 % loss decrease per 20 steps (Iterations): the last
+# steps of a fixed schedule hardly lowered the loss (benchmarks/history.md "Speed").
 STAGE3_TOLERANCE = 0.005
 
-# Stage 2's first half at half size in `deface` and `fast` (deface/fit/coarse.py): 200 of 400 steps kept target
-# synthesis (25.98 -> 25.99 dB), UV consistency and the ITA gap on the 8 shadow pairs at the full schedule
-# (BENCHMARKS.md "Speed").
+# Stage 2's first half at half size in `deface` and `fast` (deface/fit/coarse.py): as good on the shadow pairs at
+# half the cost (benchmarks/history.md "Speed").
 STAGE2_COARSE_SHARE = 0.5
 
 # The tone stays at its start in `deface` (ToneConfig.learning_rate; BENCHMARKS.md "Skin tone").
@@ -112,31 +96,26 @@ TONE_STEP = 0.0
 # Levels of the stage-3 texture pyramid in the default preset (deface/texture/pyramid.py, BENCHMARKS.md).
 TEXTURE_LEVELS = 5
 
-# Stage 3's diffuse step scales with T^0's level in `deface` (LearningRates.stage3_diffuse_level); the step of
-# 0.005 is the one the preset's stage 3 was tuned with, on the model's mean skin (green 0.33: Jensen et al.
-# 2001's mean Rd, deface/models/albedo_prior.py). On the 8 shadow pairs: speckle 2.90 -> 1.48, UV consistency
-# +0.2 dB, target synthesis +0.03 dB (BENCHMARKS.md "UV-space textures"). The diffuse map's regularisers, GP and
-# LP are measured relative to that level too (Weights.diffuse_level): on the 8 pairs UV consistency 30.76 ->
-# 31.33 dB, LPIPS 8.50 -> 7.87, target synthesis 26.76 -> 26.73 (BENCHMARKS.md "UV-space textures").
+# Stage 3's diffuse step and the diffuse map's regularisers scale with T^0's level in `deface`
+# (LearningRates.stage3_diffuse_level, Weights.diffuse_level), so a dark skin is refined like a light one: the
+# step of 0.005 is the one stage 3 was tuned with on the model's mean skin (green 0.33: Jensen et al. 2001's mean
+# Rd, deface/models/albedo_prior.py; docs/textures.md).
 DIFFUSE_STEP_LEVEL = AlbedoPriorConfig().skin_rgb[1]
 
 # Stage 3 holds out 10 % of the face's pixels and keeps the step that predicts them best in `deface` and `fast`
-# (Iterations.stage3_holdout, deface/fit/holdout.py). On the 8 shadow pairs (quick schedule): target synthesis
-# 26.16 -> 26.66 dB, UV consistency 29.57 -> 31.05 dB, speckle 1.71 -> 0; on the renders of known albedo the
-# maps are closer to the true albedo (gain-matched PSNR 35.0 -> 35.6 dB) with less of its fine detail's
-# amplitude (BENCHMARKS.md "UV-space textures").
+# (Iterations.stage3_holdout, deface/fit/holdout.py): later steps fit colour noise (docs/textures.md).
 STAGE3_HOLDOUT = 0.1
 
 
 # Stage 2's L_lan weight in `deface` and `fast`, its distances in units of the face's size (Weights.landmark_units).
 # With the paper's 1e-3 (squared working pixels) L_pho pulled the ICT blendshapes to their bounds (mouthClose 1 with
-# the jaw shut folds the lips over the nose): a 15-px RMS landmark error and the photo's beard mapped onto the
-# nose's texels. On the renders of known geometry (../shared/data/detail-synth/mesh.obj) this weight keeps
-# stage 1's accuracy (docs/textures.md "Geometry").
+# the jaw shut folds the lips over the nose) and the photo's beard landed on the nose's texels; the weight was
+# chosen on renders of known geometry (docs/textures.md "The person's detail").
 STAGE2_LANDMARKS = 1e4
 
 # Stage 2 in `deface` weighs pixels down where the photo has hair-like fine texture (deface/priors/shading_evidence.py):
-# its albedo model has no room for a beard, so the lights and masks explained it (docs/textures.md "Dark albedo").
+# its albedo model has no room for a beard, so the lights and masks explained it (docs/textures.md "The person's
+# detail").
 SHADING_EVIDENCE = 3.0
 
 # The offline face region h in `deface`: the hull of the landmarks grown by 6 % of the face's size (the skin model
