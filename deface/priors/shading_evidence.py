@@ -9,13 +9,18 @@ above, a moustache as a mask. With this weight on stage 2's photometric term, su
 
     fine   = log Y - G_a * log Y                 Y the photo's linear luminance, a = ``fine_scale`` x face size
     energy = G_b * fine^2                        b = ``energy_scale`` x face size
-    weight = exp(-energy / (strength x median energy over the face))
+    step   = k G_b * |g - G_3b * g|^2            g = grad (G_b * log Y): what a step of log Y alone gives
+    weight = exp(-max(energy - step, 0) / (strength x median energy over the face))
 
-A shadow's edge is a line of high energy a few pixels wide; the beard is an area of it.
+A cast shadow's sharp edge also leaves fine energy, along a band a few pixels wide; unlike hair it is a step of
+the smoothed log luminance, whose gradient at the coarser scale b predicts that energy (k: the ratio of the two
+for an ideal step, :func:`step_ratio`). Hair's strokes average out at that scale, so their energy stays. Without
+the step's share the masks would not be fitted along shadows' edges, and stage 3 drew the edges into the map.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +41,9 @@ class ShadingEvidenceConfig:
     about a pixel at the default working size."""
     energy_scale: float = 0.02
     """Gaussian over which the fine texture's energy is averaged, as a share of the face's size."""
+    edges_as_shading: bool = True
+    """Take off the energy a step of log luminance (a cast shadow's edge) alone would leave, so shadow edges keep
+    their weight and hair does not."""
     floor: float = 1e-3
     """Least linear luminance of the log (dark pixels' noise stays finite)."""
 
@@ -46,8 +54,36 @@ def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config
     if config.strength <= 0:
         return np.ones(image.shape[:2], np.float32)
     log_luminance = np.log(np.maximum(image @ LUMINANCE, config.floor))
-    fine = log_luminance - ndimage.gaussian_filter(log_luminance, config.fine_scale * face_size, mode="nearest")
-    energy = ndimage.gaussian_filter(fine * fine, config.energy_scale * face_size, mode="nearest")
+    fine_scale, energy_scale = config.fine_scale * face_size, config.energy_scale * face_size
+    fine = log_luminance - ndimage.gaussian_filter(log_luminance, fine_scale, mode="nearest")
+    energy = ndimage.gaussian_filter(fine * fine, energy_scale, mode="nearest")
+    if config.edges_as_shading:
+        energy = np.maximum(energy - step_energy(log_luminance, fine_scale, energy_scale), 0.0)
     inside = face > 0.5
     reference = float(np.median(energy[inside])) if inside.any() else float(np.median(energy))
     return np.exp(-energy / (config.strength * max(reference, 1e-12))).astype(np.float32)
+
+
+def step_energy(log_luminance: np.ndarray, fine_scale: float, energy_scale: float) -> np.ndarray:
+    """[H, W]: the fine energy that steps of ``log_luminance`` alone would give, from its gradient at
+    ``energy_scale`` (pixels) less the gradient's mean over three times that scale: a step's gradient is local,
+    smooth shading's is the same over the wider window (and leaves no fine energy)."""
+    smooth = ndimage.gaussian_filter(log_luminance, energy_scale, mode="nearest")
+    local = [g - ndimage.gaussian_filter(g, 3 * energy_scale, mode="nearest") for g in np.gradient(smooth)]
+    squared = ndimage.gaussian_filter(local[0] ** 2 + local[1] ** 2, energy_scale, mode="nearest")
+    return step_ratio(round(fine_scale, 3), round(energy_scale, 3)) * squared
+
+
+@functools.lru_cache(maxsize=64)
+def step_ratio(fine_scale: float, energy_scale: float) -> float:
+    """k: the fine energy of an ideal step over its smoothed squared gradient (both as in :func:`texture_weight`)
+    at the step."""
+    side = int(40 * max(energy_scale, 1.0)) + 64
+    step = (np.arange(side) >= side // 2).astype(np.float64)
+    fine = step - ndimage.gaussian_filter1d(step, fine_scale, mode="nearest")
+    energy = ndimage.gaussian_filter1d(fine * fine, energy_scale, mode="nearest")
+    gradient = np.gradient(ndimage.gaussian_filter1d(step, energy_scale, mode="nearest"))
+    gradient = gradient - ndimage.gaussian_filter1d(gradient, 3 * energy_scale, mode="nearest")
+    squared = ndimage.gaussian_filter1d(gradient * gradient, energy_scale, mode="nearest")
+    centre = side // 2
+    return float(energy[centre - 1:centre + 1].mean() / squared[centre - 1:centre + 1].mean())
