@@ -176,7 +176,8 @@ class LearningRates:
     step; the step is then scaled by T^0's own level over this one. 0 = one step for every map (the paper's).
     Adam moves each parameter by about its step whatever the gradient's size, so a fixed step is a fixed
     change of albedo per texel: twice as large a share of a skin half as light, and dark skins' textures
-    carried several times the texel noise of light ones (docs/textures.md). Scaled, every tone gets the same relative refinement (deface/fit/stage3.py :func:`diffuse_step`)."""
+    carried several times the texel noise of light ones (docs/textures.md). Scaled, every tone gets the same
+    relative refinement (deface/fit/stage3.py :func:`diffuse_step`)."""
     stage3_specular: float = 0.005
     """Stage 3: the specular UV map."""
     stage3_roughness: float = 0.01
