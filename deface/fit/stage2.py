@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import numpy as np
 import torch
 
 from deface.decouple.ace import light_areas
@@ -16,9 +17,10 @@ from deface.fit.coarse import can_coarsen, coarse_context, half_size
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
 from deface.fit.state import FrameRender, LossTerms, StageContext, compose_face
+from deface.io.images import linear_to_srgb
 from deface.losses import decouple as decouple_losses
 from deface.models.tone_neutral import ToneBoxColours, keep_tone_
-from deface.priors.shading_evidence import texture_weight
+from deface.priors.shading_evidence import shading_target, texture_weight
 
 
 @dataclass(frozen=True)
@@ -72,17 +74,23 @@ def run_stage2(context: StageContext) -> Stage2Result:
 
 
 def _weighted_by_evidence(context: StageContext) -> StageContext:
-    """The context whose face region h is weighted by how much each pixel tells about the shading
-    (deface/priors/shading_evidence.py); the same context when that is off. Stage 3 keeps h itself."""
+    """Stage 2's context with each pixel counted by how much it tells about the shading
+    (deface/priors/shading_evidence.py): h weighted, or the photo filled from well-evidenced neighbours
+    (``fill_scale``); the same context when that is off. Stage 3 keeps h and the photo themselves."""
     evidence = context.config.shading_evidence
     if evidence.strength <= 0:
         return context
     inputs = context.inputs
     sizes = inputs.landmarks.face_size if inputs.landmarks.face_size is not None else \
         torch.full((inputs.num_frames,), float(max(context.target.size)) / 2)
-    weighted = tuple(h * torch.as_tensor(texture_weight(context.target.images[frame].numpy(), h.numpy(),
-                                                        float(sizes[frame]), evidence))
-                     for frame, h in enumerate(inputs.face_classifier))
+    images = [context.target.images[frame].numpy() for frame in range(inputs.num_frames)]
+    weights = [texture_weight(image, h.numpy(), float(size), evidence)
+               for image, h, size in zip(images, inputs.face_classifier, sizes, strict=True)]
+    if evidence.fill_scale > 0:
+        filled = [np.clip(linear_to_srgb(shading_target(image, weight, float(size), evidence)), 0.0, 1.0)
+                  for image, weight, size in zip(images, weights, sizes, strict=True)]
+        return replace(context, inputs=replace(inputs, target=replace(inputs.target, frames_srgb=filled)))
+    weighted = tuple(h * torch.as_tensor(weight) for h, weight in zip(inputs.face_classifier, weights, strict=True))
     return replace(context, inputs=replace(inputs, face_classifier=weighted))
 
 
