@@ -86,3 +86,12 @@ def test_weights_follow_the_face_size(scale):
     other = texture_weight(resized, np.ones(resized.shape[:2]), FACE_SIZE * scale, CONFIG)
     back = ndimage.zoom(other, 1 / scale, order=1)[:SIZE, :SIZE]
     assert abs(back[65:95, 65:95].mean() - base[65:95, 65:95].mean()) < 0.1
+
+
+def test_the_strength_sets_how_fast_the_weight_falls_with_the_face_s_typical_texture():
+    """The scale is the face's median texture energy, steps and all: a stronger setting (smaller strength)
+    lowers plain skin's weight smoothly, it does not turn the weight into a yes/no mask."""
+    image = _bearded_and_shadowed()
+    strong, mild = (texture_weight(image, FACE, FACE_SIZE, ShadingEvidenceConfig(strength=s)) for s in (0.75, 3.0))
+    skin = (slice(10, 50), slice(20, 140))
+    assert 0.2 < strong[skin].mean() < mild[skin].mean() < 0.95

@@ -62,10 +62,10 @@ def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config
     fine_scale, energy_scale = config.fine_scale * face_size, config.energy_scale * face_size
     fine = log_luminance - ndimage.gaussian_filter(log_luminance, fine_scale, mode="nearest")
     energy = ndimage.gaussian_filter(fine * fine, energy_scale, mode="nearest")
-    if config.edges_as_shading:
-        energy = np.maximum(energy - step_energy(log_luminance, fine_scale, energy_scale), 0.0)
     inside = face > 0.5
     reference = float(np.median(energy[inside])) if inside.any() else float(np.median(energy))
+    if config.edges_as_shading:  # after the reference: it is the face's typical texture, steps and all
+        energy = np.maximum(energy - step_energy(log_luminance, fine_scale, energy_scale), 0.0)
     return np.exp(-energy / (config.strength * max(reference, 1e-12))).astype(np.float32)
 
 
