@@ -3,6 +3,8 @@ as they are, hair-like texture lowers them, a cast shadow's edge only along a th
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -10,7 +12,7 @@ from scipy import ndimage
 from deface.priors.shading_evidence import ShadingEvidenceConfig, texture_weight
 
 SIZE, FACE_SIZE = 160, 150.0
-CONFIG = ShadingEvidenceConfig(strength=3.0)
+CONFIG = ShadingEvidenceConfig(strength=3.0, edges_as_shading=True)
 
 
 def _skin(seed: int = 0) -> np.ndarray:
@@ -92,6 +94,6 @@ def test_the_strength_sets_how_fast_the_weight_falls_with_the_face_s_typical_tex
     """The scale is the face's median texture energy, steps and all: a stronger setting (smaller strength)
     lowers plain skin's weight smoothly, it does not turn the weight into a yes/no mask."""
     image = _bearded_and_shadowed()
-    strong, mild = (texture_weight(image, FACE, FACE_SIZE, ShadingEvidenceConfig(strength=s)) for s in (0.75, 3.0))
+    strong, mild = (texture_weight(image, FACE, FACE_SIZE, replace(CONFIG, strength=s)) for s in (0.75, 3.0))
     skin = (slice(10, 50), slice(20, 140))
     assert 0.2 < strong[skin].mean() < mild[skin].mean() < 0.95

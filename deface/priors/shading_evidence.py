@@ -46,9 +46,10 @@ class ShadingEvidenceConfig:
     Above 0: stage 2 fits every pixel of h, but to the photo with each pixel blended towards its
     neighbourhood's well-evidenced pixels by 1 - w (a Gaussian of this share of the face's size, normalised by
     the weights), so that the lights and masks under a beard are those of the skin around it."""
-    edges_as_shading: bool = True
+    edges_as_shading: bool = False
     """Take off the energy a step of log luminance (a cast shadow's edge) alone would leave, so shadow edges keep
-    their weight and hair does not."""
+    their weight. Off: on the renders of known albedo it also took a beard's energy off under a key light (its
+    strokes' shading is a step too) and the beard went into the lights (docs/textures.md)."""
     floor: float = 1e-3
     """Least linear luminance of the log (dark pixels' noise stays finite)."""
 
