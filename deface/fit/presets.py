@@ -114,9 +114,10 @@ STAGE3_HOLDOUT = 0.1
 STAGE2_LANDMARKS = 1e4
 
 # Stage 2 in `deface` weighs pixels down where the photo has hair-like fine texture (deface/priors/shading_evidence.py):
-# its albedo model has no room for a beard, so the lights and masks explained it (docs/textures.md "The person's
-# detail").
-SHADING_EVIDENCE = 3.0
+# its albedo model has no room for a beard, so the lights and masks explained it. A lower strength keeps more of a
+# beard and lets more of a shadow's edge into the map; 1.5 scored best against the true albedo (docs/textures.md
+# "The person's detail").
+SHADING_EVIDENCE = 1.5
 # ... and fits them to the photo filled from the well-evidenced skin around them, so the lights and masks under a
 # beard are the skin's around it (0: the pixels only count less, which left the masks there unconstrained).
 SHADING_FILL = 0.0
