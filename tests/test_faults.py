@@ -176,6 +176,7 @@ def test_a_second_writer_of_the_same_output_skips_it(photo, tmp_path, fake_fit):
     assert sorted(p.name for p in out.iterdir()) == ["batch.jsonl", "face", "index.html"]
 
 
+@pytest.mark.slow
 def test_two_processes_writing_the_same_output(photo, tmp_path):
     out = tmp_path / "out"
     go = tmp_path / "go"
@@ -233,6 +234,7 @@ def _two_photos(photo: Path) -> Path:
     return photo.parent
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode, sent, code", [("fit", signal.SIGINT, 130), ("write", signal.SIGINT, 130),
                                               ("fit", signal.SIGTERM, 143), ("write", signal.SIGTERM, 143)])
 def test_signal_ends_the_run_in_one_line_and_a_rerun_resumes(photo, tmp_path, mode, sent, code):
@@ -265,6 +267,7 @@ def test_sigint_during_a_real_fit(photos, tmp_path):
     assert not out.exists() or os.listdir(out) == []
 
 
+@pytest.mark.slow
 def test_kill_9_mid_write_leaves_staging_that_the_rerun_removes(photo, tmp_path):
     out = tmp_path / "out"
     process = _driver("write", 60, photo, "-o", out)

@@ -40,6 +40,9 @@ def free_port() -> int:
         return sock.getsockname()[1]
 
 
+# A real browser against a running server: slow (deface/web is covered without one by test_web_app.py).
+pytestmark = pytest.mark.slow
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory, shared):
     """`deface serve` in its own process, in an empty working directory with its own temp directory."""

@@ -179,8 +179,9 @@ PRESETS = {
 DESCRIPTIONS = {
     "paper": "The paper's Table 6: n = 5 lights, f and g, eps = 0.17, 400/200 stage-2/3 steps.",
     "deface": "The default: the paper's method with M_o = M_R h instead of g, eps = 0.09, n = 3, Fourier f; "
-              "gated texture pyramid, completion of unseen texels, and the person's skin tone (free tone axis, "
-              "lights held to the scene's illuminant).",
+              "gated texture pyramid, completion of unseen texels, the person's detail (stage 2 weighs pixels by "
+              "their shading evidence, no GP or LP) and skin tone (free tone axis, lights held to the scene's "
+              "illuminant).",
     "deface-mean-skin": "deface with the model's mean skin and free lights (the earlier default; loses the "
                         "person's skin tone): for comparison only.",
     "code-images": "The authors' code config for VoxCeleb2 images (L = 1.5, eps = 0.15).",
