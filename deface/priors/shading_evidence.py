@@ -9,13 +9,13 @@ above, a moustache as a mask. With this weight on stage 2's photometric term, su
 
     fine   = log Y - G_a * log Y                 Y the photo's linear luminance, a = ``fine_scale`` x face size
     energy = G_b * fine^2                        b = ``energy_scale`` x face size
-    step   = k G_b * |g - G_3b * g|^2            g = grad (G_b * log Y): what a step of log Y alone gives
-    weight = exp(-max(energy - step, 0) / (strength x median energy over the face))
+    weight = exp(-energy / (strength x median energy over the face))
+    (with ``edges_as_shading``: energy - k G_b * |g - G_3b * g|^2, g = grad (G_b * log Y), at least 0)
 
-A cast shadow's sharp edge also leaves fine energy, along a band a few pixels wide; unlike hair it is a step of
-the smoothed log luminance, whose gradient at the coarser scale b predicts that energy (k: the ratio of the two
-for an ideal step, :func:`step_ratio`). Hair's strokes average out at that scale, so their energy stays. Without
-the step's share the masks would not be fitted along shadows' edges, and stage 3 drew the edges into the map.
+A cast shadow's sharp edge also leaves fine energy, along a band a few pixels wide, so the masks are fitted less
+along it. ``edges_as_shading`` (off) takes off what a step of the smoothed log luminance predicts (k: the ratio
+of the two for an ideal step, :func:`step_ratio`; hair's strokes average out at that scale); on the renders of
+known albedo it also took off a beard's energy under a key light, whose strokes' shading is a step too.
 """
 
 from __future__ import annotations
