@@ -107,9 +107,7 @@ def uv_scores(source: FitOutput, target: FitOutput, shadow: np.ndarray | None = 
 
 def _working_frame(mask: np.ndarray, framing) -> np.ndarray:
     """A mask [H0, W0] in the photo's pixels resampled to the fit's working frame [H, W] (its crop and scale)."""
-    from deface.io.images import resize_max
-
-    return framing.window(resize_max(mask[..., None].astype(np.float32), max(framing.scene_size))[0])[..., 0]
+    return framing.window(framing.scene_image(mask[..., None].astype(np.float32)))[..., 0]
 
 
 def fit_detail(result: FitOutput) -> dict[str, float]:

@@ -57,11 +57,6 @@ class DecoupleConfig:
     clipped_as_bound: bool = False
     """L_pho takes a clipped channel of the photo (sRGB >= 0.98) as a lower bound, not a value: a render above
     it costs nothing (deface/losses/photometric.py). Off: the paper's loss."""
-    stage2_robust_scale: float = 0.0
-    """Stage 2's L_pho counts a pixel's miss |d| as c I log(1 + |d| / (c I)) with c this value and I the photo's
-    (deface/losses/photometric.py ``saturated``): as |d| up to a few c, ever less beyond. Stage 2's albedo model
-    has no room for a beard, a birthmark or make-up; under L1 (0, the paper's) they pull the lights as hard as
-    any skin, and the lights darken the chin to explain a goatee."""
     hidden: tuple[int, ...] = (16, 64, 64)
     """Hidden widths of f (the authors' 3->16->64->64->n)."""
     fourier_frequencies: int = 0

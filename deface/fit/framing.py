@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from deface.io.images import resize_max
 from deface.render.camera import Camera
 
 
@@ -69,6 +70,10 @@ class Framing:
     def is_whole(self) -> bool:
         """Whether the working frames are the whole scene (no crop: the face fills the photo, or crop is off)."""
         return self.scene_offset == (0, 0) and tuple(self.size) == self.scene_size
+
+    def scene_image(self, image: np.ndarray) -> np.ndarray:
+        """An input-sized image [H0, W0, C] resized to the scene [Hs, Ws, C]."""
+        return resize_max(image, max(self.scene_size))[0]
 
     def window(self, scene: np.ndarray) -> np.ndarray:
         """The working frame [H, W, ...] cut from a scene-sized image [Hs, Ws, ...]."""

@@ -118,9 +118,6 @@ STAGE2_LANDMARKS = 1e4
 # beard and lets more of a shadow's edge into the map; 1.5 scored best against the true albedo (docs/textures.md
 # "The person's detail").
 SHADING_EVIDENCE = 1.5
-# ... and fits them to the photo filled from the well-evidenced skin around them, so the lights and masks under a
-# beard are the skin's around it (0: the pixels only count less, which left the masks there unconstrained).
-SHADING_FILL = 0.0
 
 # The offline face region h in `deface`: the hull of the landmarks grown by 6 % of the face's size (the skin model
 # sets the face's edge), and the beard zone counted as face as face parsers count it (deface/priors/face_region.py).
@@ -141,7 +138,7 @@ def _deface() -> FitConfig:
         learning_rates=LearningRates(stage3_diffuse_level=DIFFUSE_STEP_LEVEL),
         weights=Weights(diffuse_level=DIFFUSE_STEP_LEVEL, landmarks=STAGE2_LANDMARKS, landmark_units="face"),
         priors=PriorConfig(global_prior=False, local_prior=False),
-        shading_evidence=ShadingEvidenceConfig(strength=SHADING_EVIDENCE, fill_scale=SHADING_FILL),
+        shading_evidence=ShadingEvidenceConfig(strength=SHADING_EVIDENCE),
         skin_classifier=SKIN_CLASSIFIER,
     )
 

@@ -9,18 +9,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import numpy as np
 import torch
 
 from deface.decouple.ace import light_areas
 from deface.fit.coarse import can_coarsen, coarse_context, half_size
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
-from deface.fit.state import FrameRender, LossTerms, StageContext, compose_face
-from deface.io.images import linear_to_srgb
+from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.losses import decouple as decouple_losses
 from deface.models.tone_neutral import ToneBoxColours, keep_tone_
-from deface.priors.shading_evidence import shading_target, texture_weight
+from deface.priors.shading_evidence import texture_weight
 
 
 @dataclass(frozen=True)
@@ -74,23 +72,17 @@ def run_stage2(context: StageContext) -> Stage2Result:
 
 
 def _weighted_by_evidence(context: StageContext) -> StageContext:
-    """Stage 2's context with each pixel counted by how much it tells about the shading
-    (deface/priors/shading_evidence.py): h weighted, or the photo filled from well-evidenced neighbours
-    (``fill_scale``); the same context when that is off. Stage 3 keeps h and the photo themselves."""
+    """Stage 2's context whose face region h is weighted by how much each pixel tells about the shading
+    (deface/priors/shading_evidence.py); the same context when that is off. Stage 3 keeps h itself."""
     evidence = context.config.shading_evidence
     if evidence.strength <= 0:
         return context
     inputs = context.inputs
     sizes = inputs.landmarks.face_size if inputs.landmarks.face_size is not None else \
         torch.full((inputs.num_frames,), float(max(context.target.size)) / 2)
-    images = [context.target.images[frame].numpy() for frame in range(inputs.num_frames)]
-    weights = [texture_weight(image, h.numpy(), float(size), evidence)
-               for image, h, size in zip(images, inputs.face_classifier, sizes, strict=True)]
-    if evidence.fill_scale > 0:
-        filled = [np.clip(linear_to_srgb(shading_target(image, weight, float(size), evidence)), 0.0, 1.0)
-                  for image, weight, size in zip(images, weights, sizes, strict=True)]
-        return replace(context, inputs=replace(inputs, target=replace(inputs.target, frames_srgb=filled)))
-    weighted = tuple(h * torch.as_tensor(weight) for h, weight in zip(inputs.face_classifier, weights, strict=True))
+    weighted = tuple(h * torch.as_tensor(texture_weight(context.target.images[frame].numpy(), h.numpy(),
+                                                        float(sizes[frame]), evidence))
+                     for frame, h in enumerate(inputs.face_classifier))
     return replace(context, inputs=replace(inputs, face_classifier=weighted))
 
 
@@ -134,7 +126,7 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool,
     for frame in range(frames):
         geometry = context.geometry(frame)  # once per step: shared by the render and L_lan
         rendered = context.render_frame(frame, textures, refresh_shadows, geometry=geometry)
-        total = total + terms.add("photometric", weights.photometric * _photometric(context, frame, rendered),
+        total = total + terms.add("photometric", weights.photometric * context.photometric(frame, rendered),
                                   per_frame)
         total = total + terms.add("landmarks", weights.landmarks * context.inputs.landmarks.loss(geometry, frame),
                                   per_frame)
@@ -147,19 +139,6 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool,
     total = total + terms.add("identity_prior", weights.identity_prior * scene.identity.pow(2).mean())
     total = total + terms.add("expression_prior", weights.expression_prior * scene.expression.pow(2).mean())
     return total + terms.add("scene_light_colour", context.scene_light_prior())
-
-
-def _photometric(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:
-    """Stage 2's L_pho. With ``decouple.stage2_robust_scale`` the lights, the geometry and the albedo coefficients
-    are fitted to its saturated form (what the albedo model cannot explain pulls them little) while the light
-    masks f keep the paper's L1: a cast shadow is a large miss the masks must follow."""
-    robust = context.config.decouple.stage2_robust_scale
-    if robust <= 0:
-        return context.photometric(frame, rendered)
-    images, masks = rendered.light_images, rendered.light_masks
-    for_lights = replace(rendered, face=compose_face(images, masks.detach()))
-    for_masks = replace(rendered, face=compose_face(images.detach(), masks))
-    return context.photometric(frame, for_lights, robust) + context.photometric(frame, for_masks)
 
 
 def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool,

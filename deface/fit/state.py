@@ -228,12 +228,11 @@ class StageContext:
         cache = self.shadow_caches[frame]
         return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
 
-    def photometric(self, frame: int, rendered: FrameRender, robust_scale: float = 0.0) -> torch.Tensor:
+    def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
         return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
                                 rendered.coverage, blur=self.config.render.render_blur,
                                 form=self.config.decouple.loss_form,
-                                clipped=self.target.clipped[frame] if self.config.decouple.clipped_as_bound else None,
-                                robust_scale=robust_scale)
+                                clipped=self.target.clipped[frame] if self.config.decouple.clipped_as_bound else None)
 
 
 class LossTerms:

@@ -12,7 +12,7 @@ import torch
 
 from deface.fit.config import FitConfig
 from deface.fit.framing import Framing, choose_framing, face_box
-from deface.io.images import CLIPPED, resize_max, srgb_to_linear
+from deface.io.images import CLIPPED, srgb_to_linear
 from deface.landmarks.detect import Landmarks
 from deface.render.renderer import RenderConfig
 
@@ -83,7 +83,7 @@ def frame_target(frames: list[np.ndarray], landmarks: list[Landmarks], config: F
     box = face_box([found.points for found in landmarks], input_size) if config.crop.enabled else None
     cap = config.resolution if len(frames) == 1 else min(config.resolution, config.clip_resolution)
     framing = choose_framing(input_size, box, cap, config.crop.margin)
-    scene = [resize_max(frame, max(framing.scene_size))[0] for frame in frames]
+    scene = [framing.scene_image(frame) for frame in frames]
     crops = [framing.window(image) for image in scene]
     working = [working_landmarks(found, framing) for found in landmarks]
     return FitTarget(crops, working, framing.scale, kept_frames, framing, None if framing.is_whole else scene)

@@ -45,16 +45,12 @@ def photometric_loss(
     blur: bool = True,
     form: str = "code",
     clipped: torch.Tensor | None = None,
-    robust_scale: float = 0.0,
 ) -> torch.Tensor:
     """L_pho (scalar). I_R and I_in [..., H, W, 3]; face_region M_o = M_R g and coverage M_R [..., H, W].
 
     ``clipped`` [..., H, W, 3] bool marks channels of I_in at the encoding's top: they only say the radiance
     reached it, so a render above them is no error (a lower bound; without it a light skin's clipped red
-    under a warm light reads as less red skin and lightens the tone by ~15 degrees of ITA).
-
-    ``robust_scale`` c > 0 replaces each |d| by :func:`saturated` c I log(1 + |d| / (c I)): the same for a render
-    within a few c of the photo, ever less per unit beyond (0: |d|, the paper's)."""
+    under a warm light reads as less red skin and lightens the tone by ~15 degrees of ITA)."""
     if rendered_face.shape != image.shape or image.shape[-1] != 3:
         raise ValueError(
             f"rendered {tuple(rendered_face.shape)} and image {tuple(image.shape)} must be [..., H, W, 3]"
@@ -69,17 +65,9 @@ def photometric_loss(
     difference = render * weight + image * (1.0 - weight) - image
     if clipped is not None:
         difference = torch.where(clipped & (difference > 0), torch.zeros_like(difference), difference)
-    error = saturated(difference, image, robust_scale) if robust_scale > 0 else difference.abs()
+    error = difference.abs()
     if form == "paper":
         return error.mean()
     if form == "code":
         return (2.0 * coverage[..., None] * error).mean()
     raise ValueError(f"unknown photometric form {form!r}; choose one of {FORMS}")
-
-
-def saturated(difference: torch.Tensor, image: torch.Tensor, scale: float) -> torch.Tensor:
-    """c I log(1 + |d| / (c I)) per value: |d| for a difference small against c times the photo's value I, growing
-    only logarithmically beyond, so that what the render cannot explain (a beard the albedo model has no room for)
-    pulls the fit's parameters as much as a miss of a few c, not in proportion to its size."""
-    level = scale * image.clamp_min(1e-3)
-    return level * torch.log1p(difference.abs() / level)

@@ -41,11 +41,6 @@ class ShadingEvidenceConfig:
     about a pixel at the default working size."""
     energy_scale: float = 0.02
     """Gaussian over which the fine texture's energy is averaged, as a share of the face's size."""
-    fill_scale: float = 0.0
-    """How stage 2 uses the weight w. 0: multiplies the face region h by it (low-evidence pixels count less).
-    Above 0: stage 2 fits every pixel of h, but to the photo with each pixel blended towards its
-    neighbourhood's well-evidenced pixels by 1 - w (a Gaussian of this share of the face's size, normalised by
-    the weights), so that the lights and masks under a beard are those of the skin around it."""
     edges_as_shading: bool = False
     """Take off the energy a step of log luminance (a cast shadow's edge) alone would leave, so shadow edges keep
     their weight. Off: on the renders of known albedo it also took a beard's energy off under a key light (its
@@ -68,18 +63,6 @@ def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config
     if config.edges_as_shading:  # after the reference: it is the face's typical texture, steps and all
         energy = np.maximum(energy - step_energy(log_luminance, fine_scale, energy_scale), 0.0)
     return np.exp(-energy / (config.strength * max(reference, 1e-12))).astype(np.float32)
-
-
-def shading_target(image: np.ndarray, weight: np.ndarray, face_size: float,
-                   config: ShadingEvidenceConfig) -> np.ndarray:
-    """[H, W, 3] linear: ``image`` with each pixel blended to the weighted mean of its neighbourhood by
-    1 - ``weight`` (normalised convolution over ``fill_scale`` x ``face_size``): the photo as shading alone would
-    draw it."""
-    sigma = config.fill_scale * face_size
-    norm = ndimage.gaussian_filter(weight.astype(np.float64), sigma, mode="nearest")
-    fill = np.stack([ndimage.gaussian_filter(weight * image[..., c], sigma, mode="nearest") for c in range(3)], -1)
-    fill = fill / np.maximum(norm, 1e-6)[..., None]
-    return (weight[..., None] * image + (1.0 - weight[..., None]) * fill).astype(np.float32)
 
 
 def step_energy(log_luminance: np.ndarray, fine_scale: float, energy_scale: float) -> np.ndarray:
