@@ -27,6 +27,7 @@ import torch
 from deface.models.ict import load_ict
 from deface.render import kernels
 from deface.render.camera import Camera
+from deface.render.frame import render_frame
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import RenderConfig, Renderer
 
@@ -83,7 +84,7 @@ def run(args) -> None:
         f"(numba {'present' if kernels.numba is not None else 'missing'}), load average {os.getloadavg()}"
     )
 
-    renderer = Renderer(RenderConfig())
+    renderer = Renderer(RenderConfig(supersampling=1))  # one sample per pixel: the cost per rendered pixel
     mesh, _, _, _ = scene(256)
     median, best = timed(lambda: renderer.shadow_transfer(mesh), max(3, args.repeats // 5))
     print(
@@ -97,14 +98,14 @@ def run(args) -> None:
         fragments = renderer.rasterize(mesh, camera)
         covered = int(fragments.covered.numel())
         raster = timed(lambda: renderer.rasterize(mesh, camera), args.repeats)  # noqa: B023
-        forward = timed(lambda: renderer.render(mesh, camera, textures, sh, transfer), args.repeats)  # noqa: B023
+        forward = timed(lambda: render_frame(renderer, mesh, camera, textures, sh, transfer), args.repeats)  # noqa: B023
 
         leaves = (mesh.vertices, textures.diffuse, textures.specular, textures.roughness, sh)
 
         def step():
             for leaf in leaves:  # noqa: B023 - as a fit's optimizer.zero_grad(): fresh gradients, no accumulation
                 leaf.grad = None
-            out = renderer.render(mesh, camera, textures, sh, transfer)  # noqa: B023
+            out = render_frame(renderer, mesh, camera, textures, sh, transfer)  # noqa: B023
             out.images.sum().backward()
 
         both = timed(step, args.repeats)

@@ -147,7 +147,7 @@ class Canvas:
         coeffs = 0.7 * torch.randn(model.albedo.num_coeffs, generator=generator)
         diffuse, specular = model.albedo.textures(coeffs, 128)
         self.textures = Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), torch.full((128, 128, 1), 0.45))
-        renderer = Renderer(RenderConfig(shadow_rays=16, seed=0))
+        renderer = Renderer(RenderConfig(shadow_rays=16), seed=0)
         fragments = renderer.rasterize(self.mesh, self.camera)
         with torch.no_grad():
             shaded = renderer.shade(self.mesh, self.camera, fragments, self.textures,

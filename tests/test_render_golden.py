@@ -15,6 +15,7 @@ import pytest
 import torch
 
 from deface.render.camera import Camera
+from deface.render.frame import render_frame
 from deface.render.mesh import Mesh, Textures
 from deface.render.primitives import grid_plane, merge, uv_sphere
 from deface.render.renderer import RenderConfig, Renderer
@@ -40,7 +41,9 @@ def golden_scene():
 
 def render_golden() -> dict[str, np.ndarray]:
     mesh, camera, textures, sh = golden_scene()
-    out = Renderer(RenderConfig(shadow_rays=128)).render(mesh, camera, textures, sh)
+    renderer = Renderer(RenderConfig())  # the fit's render: its shadow rays and supersampling
+    out = render_frame(renderer, mesh, camera, textures, sh, renderer.shadow_transfer(mesh),
+                       renderer.config.supersampling)
     return {"images": out.images.numpy(), "mask": out.mask.numpy(), "depth": out.depth.numpy()}
 
 
@@ -80,7 +83,7 @@ def test_ict_normals_point_outward_and_face_renders(shared):
     model = load_ict(shared / "models")
     mesh = Mesh.create(model.mean_shape, model.triangles, model.uvs, model.triangle_uvs)
     normals = mesh.vertex_normals()
-    renderer = Renderer(RenderConfig(bands=3, shadow_rays=32))
+    renderer = Renderer(RenderConfig(shadow_rays=32), bands=3)
     camera = Camera.frontal(64, 64, distance=90.0, fov_degrees=25.0)
     # every triangle the camera sees first must face it (counter-clockwise seen from outside)
     seen = renderer.rasterize(mesh, camera).triangle_id
@@ -92,7 +95,8 @@ def test_ict_normals_point_outward_and_face_renders(shared):
     assert float(normals[nose_tip, 2]) > 0.8
     sh = torch.zeros(1, 9, 3)
     sh[0, 0] = 3.0
-    out = renderer.render(mesh, camera, Textures.constant(16), sh)
+    transfer = renderer.shadow_transfer(mesh)
+    out = render_frame(renderer, mesh, camera, Textures.constant(16), sh, transfer)
     assert out.mask[32, 32] == 1 and 0.2 < float(out.mask.mean()) < 0.8
-    visibility = renderer.cache.transfer.visibility
+    visibility = transfer.visibility
     assert float(visibility[nose_tip]) > 0.9 and float(visibility.min()) < 0.5  # concave creases are darker

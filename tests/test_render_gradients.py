@@ -39,7 +39,7 @@ class Loss:
 
     def __init__(self):
         self.mesh, self.textures, self.sh, self.params, self.weights = make_scene()
-        self.renderer = Renderer(RenderConfig(bands=3, shadow_rays=64))
+        self.renderer = Renderer(RenderConfig(shadow_rays=64), bands=3)
         cam = self.camera(self.params)
         self.transfer = self.renderer.shadow_transfer(self.mesh)
         self.triangle_id = self.renderer.rasterize(self.mesh, cam).triangle_id

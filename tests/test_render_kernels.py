@@ -10,6 +10,7 @@ from test_render_gradients import Loss
 
 from deface.render import kernels
 from deface.render.camera import Camera
+from deface.render.frame import render_frame
 from deface.render.primitives import uv_sphere
 from deface.render.renderer import RenderConfig, Renderer, _pixel_rays, vertex_irradiance
 from deface.render.sh import cosine_lobe_coefficients
@@ -299,7 +300,7 @@ def test_zbuffer_on_the_face_mesh(shared):
     model = load_face_model("ict")
     mesh = Mesh(torch.as_tensor(model.mean_shape), torch.as_tensor(model.triangles, dtype=torch.long),
                 torch.as_tensor(model.uvs), torch.as_tensor(model.triangle_uvs, dtype=torch.long))
-    renderer = Renderer(RenderConfig(bands=3, shadow_rays=8))
+    renderer = Renderer(RenderConfig(shadow_rays=8), bands=3)
     for rotation in ([np.pi, 0.0, 0.0], [np.pi, 0.6, 0.1]):  # frontal, then turned (self-occlusion)
         cam = Camera(torch.tensor(700.0), torch.tensor(rotation), torch.tensor([0.0, 1.0, 60.0]), 256, 256)
         covered, differ = _zbuffer_disagreements(renderer, mesh, cam)
@@ -376,10 +377,10 @@ def test_renderer_float32_close_to_reference():
         *(t.float() for t in (loss.textures.diffuse, loss.textures.specular, loss.textures.roughness))
     )
     camera = loss.camera({k: v.float() for k, v in loss.params.items()})
-    renderer = Renderer(RenderConfig(bands=3, shadows=False))
+    renderer = Renderer(RenderConfig(shadows=False), bands=3)
 
     def run():
-        return [renderer.render(mesh, camera, textures, loss.sh.float()).images]
+        return [render_frame(renderer, mesh, camera, textures, loss.sh.float()).images]
 
     assert_close(*both_paths(run), rtol=1e-4, atol=1e-5)
 

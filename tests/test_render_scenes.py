@@ -9,6 +9,7 @@ import torch
 
 from deface.render import kernels
 from deface.render.camera import Camera
+from deface.render.frame import render_frame
 from deface.render.mesh import Textures
 from deface.render.primitives import grid_plane, uv_sphere
 from deface.render.raycast import RayScene
@@ -65,9 +66,8 @@ def random_light(bands: int, seed: int, lights: int = 2) -> torch.Tensor:
 
 def test_sphere_depth_and_mask_match_ray_sphere():
     radius, cam = 1.0, camera()
-    out = Renderer(RenderConfig(shadows=False, specular=False)).render(
-        uv_sphere(radius, 48, 96), cam, Textures.constant(4, dtype=torch.float64), random_light(3, 0)
-    )
+    out = render_frame(Renderer(RenderConfig(shadows=False, specular=False)), uv_sphere(radius, 48, 96), cam,
+                       Textures.constant(4, dtype=torch.float64), random_light(3, 0))
     origin, dirs = pixel_rays(cam)
     t = ray_sphere(origin, dirs, radius)
     hit = ~np.isnan(t)
@@ -115,10 +115,8 @@ def test_unshadowed_diffuse_sphere_matches_analytic_irradiance():
     albedo = 0.7
     textures = Textures.constant(4, diffuse=(albedo,) * 3, dtype=torch.float64)
     # The analytic reference is linear in the SH light; the clamp of negative radiance is tested in test_render_sh.
-    config = RenderConfig(bands=bands, shadows=False, specular=False, non_negative_lights=False)
-    out = Renderer(config).render(
-        uv_sphere(radius, 48, 96), cam, textures, sh
-    )
+    renderer = Renderer(RenderConfig(shadows=False, specular=False, non_negative_lights=False), bands=bands)
+    out = render_frame(renderer, uv_sphere(radius, 48, 96), cam, textures, sh)
     origin, dirs = pixel_rays(cam)
     t = ray_sphere(origin, dirs, radius)
     normal = (origin + t[..., None] * dirs) / radius
@@ -136,7 +134,7 @@ def test_unshadowed_diffuse_sphere_matches_analytic_irradiance():
 
 def test_convex_sphere_has_no_self_shadow_and_constant_light_gives_albedo():
     sphere = uv_sphere(1.0, 24, 48)
-    renderer = Renderer(RenderConfig(bands=3, shadow_rays=64))
+    renderer = Renderer(RenderConfig(shadow_rays=64), bands=3)
     transfer = renderer.shadow_transfer(sphere)
     assert float(transfer.occluded.abs().max()) == 0.0 and float(transfer.visibility.min()) == 1.0
     # constant radiance L: diffuse albedo * L + specular k_s * L, for any roughness
@@ -145,7 +143,7 @@ def test_convex_sphere_has_no_self_shadow_and_constant_light_gives_albedo():
     textures = Textures.constant(
         4, diffuse=(0.3, 0.5, 0.7), specular=(0.1, 0.2, 0.05), roughness=0.3, dtype=torch.float64
     )
-    out = renderer.render(sphere, camera(), textures, sh, transfer)
+    out = render_frame(renderer, sphere, camera(), textures, sh, transfer)
     expected = 2.0 * (torch.tensor([0.3, 0.5, 0.7]) + torch.tensor([0.1, 0.2, 0.05])).double()
     covered = out.mask > 0
     np.testing.assert_allclose(

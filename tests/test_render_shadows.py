@@ -10,7 +10,7 @@ from scipy.special import sph_harm_y
 
 from deface.render.mesh import Mesh
 from deface.render.primitives import grid_plane, merge
-from deface.render.renderer import RenderConfig, Renderer, vertex_irradiance
+from deface.render.renderer import RenderConfig, Renderer, ShadowTransferCache, vertex_irradiance
 
 PLATE_X, PLATE_Y, PLATE_Z = (-0.5, 1.0), (-0.6, 0.6), 0.6
 
@@ -52,7 +52,7 @@ def test_shadowed_irradiance_matches_monte_carlo():
     sh = 0.15 * torch.randn(1, bands * bands, 3, generator=gen, dtype=torch.float64)
     sh[0, 0] += 1.5
     sh[0, 2] += 1.2  # more light from above, so the plate's shadow matters
-    renderer = Renderer(RenderConfig(bands=bands, shadow_rays=512))
+    renderer = Renderer(RenderConfig(shadow_rays=512), bands=bands)
     transfer = renderer.shadow_transfer(mesh)
     shadowed = vertex_irradiance(mesh, sh, transfer)[:, 0].numpy()  # [V, 3]
     unshadowed = vertex_irradiance(mesh, sh, None)[:, 0].numpy()
@@ -73,9 +73,9 @@ def test_shadowed_irradiance_matches_monte_carlo():
 
 def test_transfer_is_deterministic_and_seeded():
     mesh = scene()
-    a = Renderer(RenderConfig(bands=3, shadow_rays=64, seed=1)).shadow_transfer(mesh)
-    b = Renderer(RenderConfig(bands=3, shadow_rays=64, seed=1)).shadow_transfer(mesh)
-    c = Renderer(RenderConfig(bands=3, shadow_rays=64, seed=2)).shadow_transfer(mesh)
+    a = Renderer(RenderConfig(shadow_rays=64), bands=3, seed=1).shadow_transfer(mesh)
+    b = Renderer(RenderConfig(shadow_rays=64), bands=3, seed=1).shadow_transfer(mesh)
+    c = Renderer(RenderConfig(shadow_rays=64), bands=3, seed=2).shadow_transfer(mesh)
     assert torch.equal(a.occluded, b.occluded)
     assert not torch.equal(a.occluded, c.occluded)
     assert a.occluded.shape == (mesh.vertices.shape[0], 9)
@@ -84,8 +84,7 @@ def test_transfer_is_deterministic_and_seeded():
 
 def test_cache_refreshes_only_beyond_tolerance():
     mesh = scene()
-    renderer = Renderer(RenderConfig(bands=3, shadow_rays=32, shadow_tolerance_cm=0.05))
-    cache = renderer.cache
+    cache = ShadowTransferCache(Renderer(RenderConfig(shadow_rays=32, shadow_tolerance_cm=0.05), bands=3))
     first = cache.get(mesh)
     assert cache.refreshes == 1
     nudged = Mesh(mesh.vertices + 0.02, mesh.triangles, mesh.uvs, mesh.triangle_uvs)

@@ -7,6 +7,7 @@ import math
 import torch
 
 from deface.render.camera import Camera
+from deface.render.frame import render_frame
 from deface.render.mesh import Textures
 from deface.render.primitives import grid_plane
 from deface.render.renderer import RenderConfig, Renderer
@@ -28,9 +29,7 @@ def flat_light() -> torch.Tensor:
 
 def render(mesh, textures, factor: int):
     renderer = Renderer(RenderConfig(shadows=False, specular=False))
-    cam = supersampled_camera(camera(), factor)
-    output = renderer.shade(mesh, cam, renderer.rasterize(mesh, cam), textures, flat_light(), None)
-    return box_filter(output, factor)
+    return render_frame(renderer, mesh, camera(), textures, flat_light(), None, factor)
 
 
 def constant_textures(size: int = 8, requires_grad: bool = False) -> Textures:
@@ -42,7 +41,7 @@ def constant_textures(size: int = 8, requires_grad: bool = False) -> Textures:
 def test_factor_one_returns_the_render_unchanged():
     mesh = grid_plane((-1, 1), (-1, 1), cells=2)
     renderer = Renderer(RenderConfig(shadows=False, specular=False))
-    output = renderer.render(mesh, camera(), constant_textures(), flat_light())
+    output = render_frame(renderer, mesh, camera(), constant_textures(), flat_light())
     assert box_filter(output, 1) is output
     assert supersampled_camera(camera(), 1).width == SIZE
 

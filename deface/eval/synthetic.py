@@ -8,7 +8,7 @@ unlike photos, the diffuse texture that should be recovered is known exactly.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -18,6 +18,7 @@ from deface.landmarks.correspondence import projection_for
 from deface.landmarks.detect import Landmarks
 from deface.models.base import FaceModel
 from deface.render.camera import Camera
+from deface.render.frame import cast_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import RenderConfig, Renderer
 from deface.render.sh import sh_basis
@@ -49,17 +50,17 @@ def directional_sh(direction, strength: float, ambient: float, bands: int = 9, s
 def make_shadowed_face(model: FaceModel, size: int = 128, seed: int = 0, rays: int = 128) -> SyntheticFace:
     """Render ``model``'s mean face with a random albedo under a light partly blocked by a hat brim."""
     generator = torch.Generator().manual_seed(seed)
-    renderer = Renderer(RenderConfig(shadow_rays=rays, seed=seed))
+    renderer = Renderer(RenderConfig(shadow_rays=rays), seed=seed)
     face = Mesh.create(model.mean_shape, model.triangles, model.uvs, model.triangle_uvs)
     camera = Camera.frontal(size, size, distance=60.0, fov_degrees=34.0)
     coeffs = 0.7 * torch.randn(model.albedo.num_coeffs, generator=generator)
     diffuse, specular = model.albedo.textures(coeffs, 128)
     textures = Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), torch.full((128, 128, 1), 0.45))
     light = directional_sh((0.0, 0.8, 0.6), strength=2.0, ambient=0.25)
-    fragments = renderer.rasterize(face, camera)
     with torch.no_grad():
-        shadowed = renderer.shade(face, camera, fragments, textures, light, _brim_transfer(renderer, face))
-        clear = renderer.shade(face, camera, fragments, textures, light, renderer.shadow_transfer(face))
+        cast = cast_frame(renderer, face, camera, _brim_transfer(renderer, face))
+        shadowed = shade_frame(renderer, cast, textures, light)
+        clear = shade_frame(renderer, replace(cast, transfer=renderer.shadow_transfer(face)), textures, light)
     image = shadowed.images[0].numpy()
     coverage = shadowed.mask.numpy()
     background = np.array([0.18, 0.2, 0.16], np.float32)

@@ -17,12 +17,12 @@ from deface.export.outputs import PARAMS_FORMAT
 from deface.fit.config import FitConfig, from_dict
 from deface.fit.framing import Framing
 from deface.fit.output import FitOutput, OutputFrame, RunRecord, StoredPose, frozen_geometry
-from deface.fit.target import FitTarget
+from deface.fit.state import fit_renderer
 from deface.fit.texels import frame_views
 from deface.models.registry import load_face_model
+from deface.render.frame import cast_frame
 from deface.render.mesh import Textures
-from deface.render.renderer import Renderer, ShadowTransfer
-from deface.render.supersample import supersampled_camera
+from deface.render.renderer import ShadowTransfer
 
 OLDEST_FORMAT = 2
 """The oldest ``params.npz`` format :func:`load_fit` reads (2: a fit of the whole frame, without a crop)."""
@@ -40,18 +40,18 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     model = load_face_model(config.model, models_dir)
     pose = StoredPose(*(torch.as_tensor(arrays[name], dtype=torch.float32)
                         for name in ("identity", "expression", "rotation", "translation", "focal")))
-    renderer = Renderer(FitTarget.render_config(config))
+    renderer = fit_renderer(config)
     framing = _framing(params)
     frames = []
     for frame in range(pose.expression.shape[0]):
         geometry = frozen_geometry(model, pose, frame, framing)
-        camera = supersampled_camera(geometry.camera, config.render.supersampling)
+        cast = cast_frame(renderer, geometry.mesh, geometry.camera, _transfer(arrays, frame, config),
+                          config.render.supersampling)
         scene = arrays["scene_srgb"][frame].astype(np.float32) / 255.0 if "scene_srgb" in arrays else None
         frames.append(OutputFrame(
-            geometry, _transfer(arrays, frame, config), arrays["photos_srgb"][frame].astype(np.float32),
+            geometry, cast, arrays["photos_srgb"][frame].astype(np.float32),
             _tensor(arrays["face_classifier"][frame]), _tensor(arrays["light_masks"][frame]),
-            _tensor(arrays["face_region"][frame]), arrays["landmarks_2d"][frame],
-            (camera, renderer.rasterize(geometry.mesh, camera)), scene))
+            _tensor(arrays["face_region"][frame]), arrays["landmarks_2d"][frame], scene))
     textures = Textures(*(_tensor(arrays[name]) for name in ("diffuse", "specular", "roughness")))
     losses, terms = read_loss_log(folder / "loss_log.csv")
     record = RunRecord(params.get("seconds_per_stage", {}), losses, terms, params.get("notes", []),

@@ -17,6 +17,7 @@ from deface.models.registry import TONE_AXIS
 from deface.priors.face_region import SkinClassifierConfig
 from deface.priors.illuminant import IlluminantConfig
 from deface.priors.shading_evidence import ShadingEvidenceConfig
+from deface.render.renderer import RenderConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 
@@ -276,38 +277,6 @@ class Stage1Config:
 
 
 @dataclass(frozen=True)
-class RenderSettings:
-    """The renderer as the fit uses it (deface/render; ``deface.fit.target.render_config`` builds its
-    RenderConfig with the lights' bands and the fit's seed)."""
-
-    shadows: bool = True
-    """Ray-traced self-shadowing in the renderer."""
-    shadow_rays: int = 128
-    """Rays per vertex for the shadow transfer."""
-    shadow_refresh_every: int = 50
-    """Stage 2 refreshes the shadow transfer at most this often (geometry moves slowly)."""
-    shadow_tolerance_cm: float = 0.05
-    """A refresh recomputes the transfer only when some vertex moved more than this (cm) since the last one."""
-    shadow_ray_offset: float = 1e-3
-    """Shadow-ray origins move along the normal by this fraction of the mesh's bounding-box diagonal."""
-    specular: bool = True
-    """The roughness-driven Phong specular lobe; off: a purely Lambertian render."""
-    supersampling: int = 2
-    """Stage 3 renders s x s samples per pixel and box-filters them (deface/render/supersample.py): the
-    render becomes the pixel's area integral, so texel refinement cannot hide a checkerboard between
-    pixel centres (the paper's path tracer averaged several samples per pixel too). 1 = one sample."""
-    non_negative_lights: bool = True
-    """Each SH light is rendered with its negative radiance clamped (deface/render/sh.py ``non_negative``), as the
-    authors' renderer (NextFace) clamps the environment map it renders the SH through. Off: the SH as it is, whose
-    negative lobes let a light subtract radiance (a fitted light darkened a chin through its specular reflection
-    to explain a beard)."""
-    render_blur: bool = False
-    """L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
-    their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
-    almost invisible to the loss, which stage 3 then bakes into the texture (BENCHMARKS.md)."""
-
-
-@dataclass(frozen=True)
 class CropConfig:
     """The crop around the face that the fit works on (deface/fit/framing.py); everything written refers back
     to the whole photo."""
@@ -386,8 +355,8 @@ class FitConfig:
     shading_evidence: ShadingEvidenceConfig = field(default_factory=ShadingEvidenceConfig)
     """Which pixels stage 2 fits its lights, masks and geometry to (deface/priors/shading_evidence.py): less
     where the photo has hair-like fine texture."""
-    render: RenderSettings = field(default_factory=RenderSettings)
-    """The renderer's settings."""
+    render: RenderConfig = field(default_factory=RenderConfig)
+    """How frames are rendered (deface/render/renderer.py :class:`~deface.render.renderer.RenderConfig`)."""
     seed: int = 0
     """Seed of every random choice of the fit (torch, numpy, shadow rays, K-means)."""
     threads: int = 1

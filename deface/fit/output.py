@@ -19,14 +19,14 @@ from deface.fit.config import FitConfig
 from deface.fit.framing import Framing
 from deface.fit.log import FitLog
 from deface.fit.scene import FrameGeometry, topology_tensors
-from deface.fit.state import FrameRender, StageContext, compose_face
+from deface.fit.state import FrameRender, StageContext
 from deface.io.images import srgb_to_linear
 from deface.models.base import FaceModel
 from deface.models.ita import texture_tone
 from deface.render.camera import Camera
+from deface.render.frame import FrameCast, cast_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
-from deface.render.renderer import Fragments, Renderer, ShadowTransfer
-from deface.render.supersample import shade_supersampled, supersampled_camera
+from deface.render.renderer import Renderer, ShadowTransfer
 from deface.texture.confidence import TexelView
 
 
@@ -60,15 +60,19 @@ class OutputFrame:
     """One fitted frame: frozen geometry, shadow transfer, the photo and the masks of the fit."""
 
     geometry: FrameGeometry  # posed mesh (detached) and the working-resolution camera
-    transfer: ShadowTransfer | None  # self-shadowing of this mesh (None without shadows)
+    cast: FrameCast  # the mesh cast at config.render.supersampling samples per pixel, with its shadow transfer
     photo_srgb: np.ndarray  # [H, W, 3] float32 working-resolution input, sRGB in [0, 1]
     face_classifier: torch.Tensor  # [H, W] h
     light_masks: torch.Tensor  # [K, H, W] M_L of the kept lights
     face_region: torch.Tensor  # [H, W] M_o
     landmarks: np.ndarray  # [P, 2] the detected MediaPipe points, working pixels
-    cast: tuple[Camera, Fragments]  # the supersampled camera and what covers each of its samples
     scene_srgb: np.ndarray | None = None  # [Hs, Ws, 3] the whole input frame at the working scale, sRGB;
     # None when the working frame is the whole frame
+
+    @property
+    def transfer(self) -> ShadowTransfer | None:
+        """The mesh's self-shadowing (None without shadows)."""
+        return self.cast.transfer
 
     @property
     def photo(self) -> torch.Tensor:
@@ -147,10 +151,9 @@ class FitOutput:
         for frozen in stage3.frozen:
             rendered, _ = render_frozen(context, frozen, finished.textures)
             frames.append(OutputFrame(
-                frozen.geometry, frozen.transfer, np.asarray(target.frames_srgb[frozen.index], dtype=np.float32),
+                frozen.geometry, frozen.cast, np.asarray(target.frames_srgb[frozen.index], dtype=np.float32),
                 context.inputs.face_classifier[frozen.index], rendered.light_masks.detach(),
                 rendered.face_region.detach(), np.asarray(target.landmarks[frozen.index].points),
-                (frozen.camera, frozen.fragments),
                 None if target.scene_srgb is None else np.asarray(target.scene_srgb[frozen.index], np.float32)))
         tone = float(scene.tone.detach())
         light = context.inputs.scene_light
@@ -188,20 +191,14 @@ class FitOutput:
         renders = []
         for index, frame in enumerate(self.frames):
             view = camera(index) if callable(camera) else camera
-            if view is None:
-                cast_camera, fragments = frame.cast
-            else:
-                cast_camera = supersampled_camera(view, self.config.render.supersampling)
-                fragments = self.renderer.rasterize(frame.geometry.mesh, cast_camera)
-            output = shade_supersampled(self.renderer, frame.geometry.mesh, cast_camera, fragments, textures,
-                                        lights, frame.transfer, self.config.render.supersampling)
+            cast = frame.cast if view is None else cast_frame(self.renderer, frame.geometry.mesh, view, frame.transfer,
+                                                              self.config.render.supersampling)
+            output = shade_frame(self.renderer, cast, textures, lights)
             if own_lights and view is None:
                 masks = frame.light_masks
             else:
                 masks = torch.ones(output.images.shape[:3])
-            region = frame.face_region if view is None else output.mask
-            renders.append(FrameRender(output.images, output.mask, masks, region,
-                                       compose_face(output.images, masks), None, output.normals))
+            renders.append(FrameRender.of(output, masks, frame.face_region if view is None else output.mask))
         return renders
 
     def composite(self, rendered: FrameRender, frame: int) -> torch.Tensor:

@@ -26,10 +26,9 @@ from deface.losses import decouple as decouple_losses
 from deface.losses.texture import PAPER_WEIGHTS, SmoothDeparture, texture_regularisers
 from deface.priors.global_prior import global_prior, kmeans_palette
 from deface.priors.local_prior import local_prior
-from deface.render.camera import Camera
+from deface.render.frame import FrameCast, cast_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
-from deface.render.renderer import Fragments, RenderOutput, ShadowTransfer
-from deface.render.supersample import shade_supersampled, supersampled_camera
+from deface.render.renderer import RenderOutput
 from deface.texture.confidence import TexelView
 from deface.texture.pyramid import TexturePyramid, level_gates, level_sizes
 
@@ -48,13 +47,11 @@ class AlbedoReference:
 
 @dataclass(frozen=True)
 class FrozenFrame:
-    """A frame's stage-3 constants: geometry, ray-cast fragments, shadow transfer, M_o, reference albedo."""
+    """A frame's stage-3 constants: geometry, its cast (fragments and shadow transfer), M_o, reference albedo."""
 
     index: int  # frame number
     geometry: FrameGeometry  # detached posed mesh and the working-resolution camera
-    camera: Camera  # the camera the fragments were cast with (config.render.supersampling x finer)
-    fragments: Fragments  # ray-cast at ``camera``
-    transfer: ShadowTransfer | None  # the frame's shadow transfer (None without shadows)
+    cast: FrameCast  # cast at config.render.supersampling samples per pixel, with the frame's shadow transfer
     face_region: torch.Tensor  # [H, W] M_o from stage 2
     reference: AlbedoReference
 
@@ -186,8 +183,8 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
 
 def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, RenderOutput]:
     """Shade a frozen frame with ``textures`` and the current kept lights; M_o stays frozen."""
-    output = _shade(context, frame.geometry.mesh, frame.camera, frame.fragments, textures, frame.transfer)
-    rendered = context.compose(frame.index, output.images, output.mask, output.normals, frame.face_region)
+    output = shade_frame(context.renderer, frame.cast, textures, context.scene.lights[context.decoupling.kept])
+    rendered = context.compose(frame.index, output, frame.face_region)
     return rendered, output
 
 
@@ -202,21 +199,13 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
         mesh=Mesh(geometry.mesh.vertices.detach(), *_topology(context)),
         camera=geometry.camera.detached(),
     )
-    camera = supersampled_camera(geometry.camera, context.config.render.supersampling)
-    fragments = context.renderer.rasterize(geometry.mesh, camera)
     transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.render.shadows else None
-    output = _shade(context, geometry.mesh, camera, fragments, initial, transfer)
+    cast = cast_frame(context.renderer, geometry.mesh, geometry.camera, transfer, context.config.render.supersampling)
+    output = shade_frame(context.renderer, cast, initial, context.scene.lights[context.decoupling.kept])
     coverage = output.mask
     face_region = context.decoupling.face_region(frame, coverage, context.inputs.face_classifier[frame])
     reference = AlbedoReference(output.diffuse, output.specular, output.roughness)
-    return FrozenFrame(frame, geometry, camera, fragments, transfer, face_region.detach(), reference)
-
-
-def _shade(context: StageContext, mesh, camera, fragments, textures: Textures, transfer) -> RenderOutput:
-    """Shade under the kept lights, box-filtered to the working resolution."""
-    return shade_supersampled(context.renderer, mesh, camera, fragments, textures,
-                              context.scene.lights[context.decoupling.kept], transfer,
-                              context.config.render.supersampling)
+    return FrozenFrame(frame, geometry, cast, face_region.detach(), reference)
 
 
 def _topology(context: StageContext):

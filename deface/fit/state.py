@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import torch
 
+from deface.decouple.compose import compose_face
 from deface.fit.config import FitConfig
 from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
@@ -33,8 +34,9 @@ from deface.losses.landmarks import landmark_loss
 from deface.losses.photometric import photometric_loss
 from deface.models.base import FaceModel
 from deface.priors.illuminant import IlluminantEstimate
+from deface.render.frame import render_frame
 from deface.render.mesh import Textures
-from deface.render.renderer import Fragments, Renderer, ShadowTransferCache
+from deface.render.renderer import Fragments, Renderer, RenderOutput, ShadowTransferCache
 
 
 @dataclass(frozen=True)
@@ -96,7 +98,7 @@ class PosedFace:
     @classmethod
     def create(cls, model: FaceModel, scene: SceneParameters, config: FitConfig, target: FitTarget):
         """The face drawn at ``target``'s working frames (their size and the photo's principal point)."""
-        return cls(model, scene, topology_tensors(model), Renderer(FitTarget.render_config(config)), target.size,
+        return cls(model, scene, topology_tensors(model), fit_renderer(config), target.size,
                    principal_point=target.principal_point)
 
     def geometry(self, frame: int) -> FrameGeometry:
@@ -121,10 +123,17 @@ class FrameRender:
     region_probability: torch.Tensor | None = None  # [H, W] g (None without the field g or when M_o is frozen)
     normals: torch.Tensor | None = None  # [H, W, 3] unit normals of the render (model frame)
 
+    @classmethod
+    def of(cls, output: RenderOutput, light_masks: torch.Tensor, face_region: torch.Tensor,
+           region_probability: torch.Tensor | None = None) -> FrameRender:
+        """A render's per-light images composed with ``light_masks`` [K, H, W] (M_L) into I_R."""
+        return cls(output.images, output.mask, light_masks, face_region, compose_face(output.images, light_masks),
+                   region_probability, output.normals)
 
-def compose_face(light_images: torch.Tensor, light_masks: torch.Tensor) -> torch.Tensor:
-    """I_R [H, W, 3] = sum_k M_L[k] I_Rs[k] from ``light_images`` [K, H, W, 3] and ``light_masks`` [K, H, W]."""
-    return (light_images * light_masks[..., None]).sum(0)
+
+def fit_renderer(config: FitConfig) -> Renderer:
+    """The renderer of a fit: ``config.render`` with the lights' bands and the fit's seed."""
+    return Renderer(config.render, config.lights.bands, config.seed)
 
 
 @dataclass(frozen=True)
@@ -203,24 +212,20 @@ class StageContext:
     def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool,
                      geometry: FrameGeometry | None = None) -> FrameRender:
         geometry = geometry or self.geometry(frame)
-        fragments = self.renderer.rasterize(geometry.mesh, geometry.camera)
         transfer = self._transfer(frame, geometry.mesh, refresh_shadows)
-        kept = self.decoupling.kept
-        output = self.renderer.shade(geometry.mesh, geometry.camera, fragments, textures,
-                                     self.scene.lights[kept], transfer)
-        return self.compose(frame, output.images, output.mask, output.normals)
+        output = render_frame(self.renderer, geometry.mesh, geometry.camera, textures,
+                              self.scene.lights[self.decoupling.kept], transfer)
+        return self.compose(frame, output)
 
-    def compose(self, frame: int, light_images: torch.Tensor, coverage: torch.Tensor,
-                normals: torch.Tensor | None = None, face_region: torch.Tensor | None = None) -> FrameRender:
-        """The frame's render from per-light images: f's masks, and M_o (``face_region`` when frozen)."""
-        light_masks = self.decoupling.light_masks(frame, coverage)
+    def compose(self, frame: int, output: RenderOutput, face_region: torch.Tensor | None = None) -> FrameRender:
+        """The frame's render from its per-light images: f's masks, and M_o (``face_region`` when frozen)."""
+        light_masks = self.decoupling.light_masks(frame, output.mask)
         probability = None
         if face_region is None:
-            probability = self.decoupling.region_probability(frame, coverage)
-            face_region = self.decoupling.face_region(frame, coverage, self.inputs.face_classifier[frame],
+            probability = self.decoupling.region_probability(frame, output.mask)
+            face_region = self.decoupling.face_region(frame, output.mask, self.inputs.face_classifier[frame],
                                                       probability)
-        return FrameRender(light_images, coverage, light_masks, face_region,
-                           compose_face(light_images, light_masks), probability, normals)
+        return FrameRender.of(output, light_masks, face_region, probability)
 
     def _transfer(self, frame: int, mesh, refresh: bool):
         if not self.config.render.shadows:

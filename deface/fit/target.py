@@ -14,7 +14,6 @@ from deface.fit.config import FitConfig
 from deface.fit.framing import Framing, choose_framing, face_box
 from deface.io.images import CLIPPED, srgb_to_linear
 from deface.landmarks.detect import Landmarks
-from deface.render.renderer import RenderConfig
 
 
 @dataclass(frozen=True)
@@ -64,14 +63,6 @@ class FitTarget:
         if not self.framing.is_whole:
             raise ValueError("this target is a crop without its scene (stage 2's half-size level has none)")
         return self.frames_srgb
-
-    @staticmethod
-    def render_config(config: FitConfig) -> RenderConfig:
-        render = config.render
-        return RenderConfig(bands=config.lights.bands, shadows=render.shadows, shadow_rays=render.shadow_rays,
-                            specular=render.specular, shadow_tolerance_cm=render.shadow_tolerance_cm,
-                            seed=config.seed, shadow_ray_offset=render.shadow_ray_offset,
-                            non_negative_lights=render.non_negative_lights)
 
 
 def frame_target(frames: list[np.ndarray], landmarks: list[Landmarks], config: FitConfig,

@@ -34,25 +34,38 @@ from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 @dataclass(frozen=True)
 class RenderConfig:
-    """Renderer settings."""
+    """How frames are rendered: the one render config of the project (the fit's ``config.render``). The
+    renderer reads the shading and shadow fields, :func:`deface.render.frame.cast_frame` the supersampling,
+    and the fit the two fields marked "fit". The lights' bands and the shadow rays' seed are the run's, given
+    to :class:`Renderer` beside it."""
 
-    bands: int = 9
-    """SH bands B of the lights (B² coefficients per colour) and of the shadow transfer."""
     shadows: bool = True
-    """Ray-traced self-shadowing: ``render`` refreshes/uses its transfer cache when no transfer is given."""
-    shadow_rays: int = 256
+    """Ray-traced self-shadowing (deface/render/shadow.py); off: nothing is occluded."""
+    shadow_rays: int = 128
     """Shadow rays per vertex S for one transfer refresh (cost ~ V x S Embree any-hit queries)."""
-    specular: bool = True
-    """Add the roughness-driven Phong specular lobe; off gives a purely Lambertian render."""
+    shadow_refresh_every: int = 50
+    """Fit: stage 2 refreshes the shadow transfer at most this often (geometry moves slowly)."""
     shadow_tolerance_cm: float = 0.05
-    """The transfer cache recomputes when any vertex moved more than this (cm) since the last refresh."""
-    seed: int = 0
-    """Seed of the per-vertex random rotations of the shadow-ray pattern (renders are deterministic)."""
+    """A refresh (:class:`ShadowTransferCache`) recomputes the transfer only when some vertex moved more than
+    this (cm) since the last one."""
     shadow_ray_offset: float = 1e-3
     """Shadow-ray origins move along the normal by this fraction of the mesh's bounding-box diagonal."""
+    specular: bool = True
+    """The roughness-driven Phong specular lobe; off: a purely Lambertian render."""
+    supersampling: int = 2
+    """Frames cast for the maps (stage 3 and every render of a finished fit) take s x s samples per pixel,
+    box-filtered (deface/render/supersample.py): the render becomes the pixel's area integral, so texel
+    refinement cannot hide a checkerboard between pixel centres (the paper's path tracer averaged several
+    samples per pixel too). 1 = one sample. Stage 2 casts one sample per pixel."""
     non_negative_lights: bool = True
-    """Render each SH light with its negative radiance clamped (:func:`deface.render.sh.non_negative`), as
-    NextFace renders its lights through a clamped environment map; off renders the SH as given."""
+    """Each SH light is rendered with its negative radiance clamped (:func:`deface.render.sh.non_negative`), as the
+    authors' renderer (NextFace) clamps the environment map it renders the SH through. Off: the SH as it is, whose
+    negative lobes let a light subtract radiance (a fitted light darkened a chin through its specular reflection
+    to explain a beard)."""
+    render_blur: bool = False
+    """Fit: L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
+    their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
+    almost invisible to the loss, which stage 3 then bakes into the texture (BENCHMARKS.md)."""
 
 
 @dataclass(frozen=True)
@@ -92,11 +105,13 @@ class RenderOutput:
 class Renderer:
     """Renders meshes under K SH lights; see the module docstring for the pipeline."""
 
-    def __init__(self, config: RenderConfig = RenderConfig()):
-        if config.bands < 1 or config.shadow_rays < 1:
-            raise ValueError("RenderConfig: bands and shadow_rays must be >= 1")
-        self.config = config
-        self.cache = ShadowTransferCache(self)
+    def __init__(self, config: RenderConfig = RenderConfig(), bands: int = 9, seed: int = 0):
+        """``bands``: SH bands B of the lights it renders (B² coefficients per colour), and of the shadow
+        transfer; ``seed``: of the per-vertex random rotations of the shadow-ray pattern (renders are
+        deterministic)."""
+        if bands < 1 or config.shadow_rays < 1 or config.supersampling < 1:
+            raise ValueError("Renderer: bands, shadow_rays and supersampling must be >= 1")
+        self.config, self.bands, self.seed = config, bands, seed
         self._scene_key: tuple[np.ndarray, np.ndarray] | None = None
         self._scene: RayScene | None = None
 
@@ -188,9 +203,9 @@ class Renderer:
             mesh.vertices,
             mesh.triangles,
             mesh.vertex_normals(),
-            cfg.bands,
+            self.bands,
             cfg.shadow_rays,
-            seed=cfg.seed,
+            seed=self.seed,
             offset=cfg.shadow_ray_offset,
             scene=self.ray_scene(mesh),
         )
@@ -269,23 +284,6 @@ class Renderer:
             specular=screen(specular),
             roughness=screen(roughness),
         )
-
-    def render(
-        self,
-        mesh: Mesh,
-        camera: Camera,
-        textures: Textures,
-        sh_lights: torch.Tensor,
-        transfer: ShadowTransfer | None = None,
-    ) -> RenderOutput:
-        """rasterize + shade. With ``config.shadows`` and no ``transfer``, uses ``self.cache`` (refreshes
-        when the mesh moved more than ``shadow_tolerance_cm``); with ``shadows=False`` nothing is occluded."""
-        if self.config.shadows and transfer is None:
-            transfer = self.cache.get(mesh)
-        elif not self.config.shadows:
-            transfer = None
-        camera = camera.resolved()
-        return self.shade(mesh, camera, self.rasterize(mesh, camera), textures, sh_lights, transfer)
 
 
 def vertex_irradiance(mesh: Mesh, sh_lights: torch.Tensor, transfer: ShadowTransfer | None = None) -> torch.Tensor:

@@ -15,8 +15,7 @@ import torch.nn.functional as F
 
 from deface.render import fast_box
 from deface.render.camera import Camera
-from deface.render.mesh import Mesh, Textures
-from deface.render.renderer import Fragments, Renderer, RenderOutput, ShadowTransfer
+from deface.render.renderer import RenderOutput
 
 
 def supersampled_camera(camera: Camera, factor: int) -> Camera:
@@ -27,13 +26,6 @@ def supersampled_camera(camera: Camera, factor: int) -> Camera:
     if factor == 1:
         return camera
     return camera.scaled(factor, camera.width * factor, camera.height * factor)
-
-
-def shade_supersampled(renderer: Renderer, mesh: Mesh, camera: Camera, fragments: Fragments, textures: Textures,
-                       lights: torch.Tensor, transfer: ShadowTransfer | None, factor: int) -> RenderOutput:
-    """Shade ``fragments`` cast at ``camera`` (``factor`` x finer than the output, :func:`supersampled_camera`)
-    under ``lights`` [K, B*B, 3] and box-filter the result to the working resolution."""
-    return box_filter(renderer.shade(mesh, camera, fragments, textures, lights, transfer), factor)
 
 
 def box_filter(output: RenderOutput, factor: int) -> RenderOutput:
