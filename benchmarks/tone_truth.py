@@ -159,6 +159,7 @@ def start_of(path: str, settings: tuple[str, ...], resolution: int) -> tuple[flo
     from deface.fit import pipeline, presets
     from deface.fit.config import override, set_from_text
     from deface.fit.log import FitLog
+    from deface.fit.rendering import albedo_textures
     from deface.fit.target import FitTarget
     from deface.io.images import load_image
 
@@ -172,7 +173,7 @@ def start_of(path: str, settings: tuple[str, ...], resolution: int) -> tuple[flo
     context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=FitLog(quiet=True))
     illuminant = context.inputs.scene_light.illuminant
     with torch.no_grad():
-        tone = texture_tone(context.albedo_textures(128).diffuse.numpy(), illuminant.level_sigma)
+        tone = texture_tone(albedo_textures(context, 128).diffuse.numpy(), illuminant.level_sigma)
     return float(context.scene.tone.detach()), illuminant.record(), tone
 
 

@@ -4,13 +4,14 @@
 
 Compares, for every run folder (one holding params.json) found under BEFORE and its counterpart under AFTER:
 every array of params.npz exactly, every PNG's pixels exactly, loss_log.csv as text, and params.json
-without the fields that record when, where and how long (timings, commit, paths). Prints each difference
+without what records when, where and how long (timings, versions, the input's path). Prints each difference
 and exits 1 when there is one.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -21,6 +22,8 @@ VOLATILE = {"seconds_per_stage", "versions", "input", "commit", "created"}
 
 
 def _strip(value):
+    if isinstance(value, str):
+        return re.sub(r"\d+(\.\d+)? s\b", "<seconds>", value)  # "stage 2 done in 40.2 s"
     if isinstance(value, dict):
         return {k: _strip(v) for k, v in value.items() if k not in VOLATILE}
     if isinstance(value, list):

@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 import torch
 
 from deface.decouple.ace import light_areas
+from deface.fit import rendering
 from deface.fit.coarse import can_coarsen, coarse_context, half_size
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
@@ -121,24 +122,24 @@ def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool,
     weights, scene, frames = context.config.weights, context.scene, context.target.num_frames
     terms = terms or LossTerms()
     per_frame = 1.0 / frames
-    textures = context.albedo_textures()
+    textures = rendering.albedo_textures(context)
     total = torch.zeros(())
     for frame in range(frames):
         geometry = context.geometry(frame)  # once per step: shared by the render and L_lan
-        rendered = context.render_frame(frame, textures, refresh_shadows, geometry=geometry)
-        total = total + terms.add("photometric", weights.photometric * context.photometric(frame, rendered),
+        rendered = rendering.render_posed(context, frame, textures, refresh_shadows, geometry=geometry)
+        total = total + terms.add("photometric", weights.photometric * rendering.photometric(context, frame, rendered),
                                   per_frame)
         total = total + terms.add("landmarks", weights.landmarks * context.inputs.landmarks.loss(geometry, frame),
                                   per_frame)
         total = total + _decoupling_terms(context, frame, rendered, before_ace, terms, per_frame)
-        total = total + terms.add("scene_light_level", context.key_light_exposure(frame, rendered), per_frame)
+        total = total + terms.add("scene_light_level", rendering.scene_light_level(context, frame, rendered), per_frame)
     total = total / frames
     total = total + terms.add("sh_regulariser",
                               weights.sh_regulariser * scene.lights[context.decoupling.kept].pow(2).mean())
     total = total + terms.add("albedo_prior", weights.albedo_prior * scene.albedo.pow(2).mean())
     total = total + terms.add("identity_prior", weights.identity_prior * scene.identity.pow(2).mean())
     total = total + terms.add("expression_prior", weights.expression_prior * scene.expression.pow(2).mean())
-    return total + terms.add("scene_light_colour", context.scene_light_prior())
+    return total + terms.add("scene_light_colour", rendering.scene_light_colour(context))
 
 
 def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool,

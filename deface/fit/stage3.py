@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from deface.fit import fast_stage3
+from deface.fit import fast_stage3, rendering
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
 from deface.fit.holdout import BestStep, HeldOutPixels
@@ -89,7 +89,7 @@ def texture_gates(context: StageContext, views: list[TexelView], size: int) -> l
 def initial_textures(context: StageContext) -> Textures:
     """T^0 at the output resolution from the fitted albedo coefficients."""
     with torch.no_grad():
-        return context.albedo_textures(context.texture_size)
+        return rendering.albedo_textures(context, context.texture_size)
 
 
 @dataclass(frozen=True)
@@ -176,7 +176,7 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
         loss = loss + texture_terms(textures, terms)
         if smooth is not None:
             loss = loss + terms.add("smooth_departure", weights.smooth_departure * smooth(textures.diffuse))
-        return loss + terms.add("scene_light_colour", context.scene_light_prior())
+        return loss + terms.add("scene_light_colour", rendering.scene_light_colour(context))
 
     return loss_of
 
@@ -184,7 +184,7 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
 def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, RenderOutput]:
     """Shade a frozen frame with ``textures`` and the current kept lights; M_o stays frozen."""
     output = shade_frame(context.renderer, frame.cast, textures, context.scene.lights[context.decoupling.kept])
-    rendered = context.compose(frame.index, output, frame.face_region)
+    rendered = rendering.compose(context, frame.index, output, frame.face_region)
     return rendered, output
 
 
@@ -261,7 +261,7 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, s
     rendered, output = render_frozen(context, frame, textures)
     loss = terms.add("photometric", weights.photometric * _photometric(context, frame.index, rendered,
                                                                        setup.held_out, errors), scale)
-    loss = loss + terms.add("scene_light_level", context.key_light_exposure(frame.index, rendered), scale)
+    loss = loss + terms.add("scene_light_level", rendering.scene_light_level(context, frame.index, rendered), scale)
     if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         loss = loss + terms.add("binary", weights.binary * decouple_losses.binary_loss(
             rendered.light_masks, rendered.coverage, form=form), scale)
@@ -279,11 +279,11 @@ def _photometric(context: StageContext, frame: int, rendered: FrameRender, held_
     """L_pho of a frame; with ``held_out``, over the fitted pixels, and the held-out ones' error appended to
     ``errors``."""
     if held_out is None:
-        return context.photometric(frame, rendered)
+        return rendering.photometric(context, frame, rendered)
     if errors is not None:
         with torch.no_grad():
-            errors.append(float(context.photometric(frame, held_out.scored(frame, rendered))))
-    return context.photometric(frame, held_out.fitted(frame, rendered))
+            errors.append(float(rendering.photometric(context, frame, held_out.scored(frame, rendered))))
+    return rendering.photometric(context, frame, held_out.fitted(frame, rendered))
 
 
 def _local_prior(output: RenderOutput, reference: AlbedoReference, coverage: torch.Tensor,

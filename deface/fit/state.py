@@ -11,8 +11,8 @@ and K kept lights with B*B SH coefficients per colour.
 - the trainable parameters: :class:`~deface.fit.scene.SceneParameters` (coefficients, pose, focal, lights,
   tone) and :class:`~deface.fit.decoupling.Decoupling` (fields f and g, kept lights). Optimisers change
   them in place; nothing else does.
-- :class:`StageContext` (frozen): the above plus config, log and the per-frame shadow-transfer caches;
-  the helpers every stage uses to render a frame and score it.
+- :class:`StageContext` (frozen): the above plus config, log and the per-frame shadow-transfer caches. It is
+  data: how a stage renders a frame of it and scores it is deface/fit/rendering.py.
 """
 
 from __future__ import annotations
@@ -27,15 +27,10 @@ from deface.fit.decoupling import Decoupling
 from deface.fit.log import FitLog
 from deface.fit.scene import FrameGeometry, SceneParameters, frame_geometry, topology_tensors
 from deface.fit.target import FitTarget
-from deface.io.images import LUMINANCE
 from deface.landmarks.correspondence import Correspondence, model_landmarks
-from deface.losses.illuminant import exposure_term, front_directions, key_light_level, light_colour_term
 from deface.losses.landmarks import landmark_loss
-from deface.losses.photometric import photometric_loss
 from deface.models.base import FaceModel
 from deface.priors.illuminant import IlluminantEstimate
-from deface.render.frame import render_frame
-from deface.render.mesh import Textures
 from deface.render.renderer import Fragments, Renderer, RenderOutput, ShadowTransferCache
 
 
@@ -180,64 +175,6 @@ class StageContext:
 
     def geometry(self, frame: int) -> FrameGeometry:
         return self.face.geometry(frame)
-
-    def albedo_textures(self, size: int | None = None) -> Textures:
-        """The albedo model's maps at the fitted coefficients (and tone, when the tone is free), ``size``
-        texels square (default: ``config.stage2_texture_size``)."""
-        size = size or self.config.stage2_texture_size
-        ita = self.scene.tone if self.config.tone.free_tone else None
-        diffuse, specular = self.model.albedo.textures(self.scene.albedo, size, ita)
-        roughness = torch.full((*diffuse.shape[:2], 1), self.model.albedo.roughness_default)
-        return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
-
-    def scene_light_prior(self) -> torch.Tensor:
-        """The scene-light colour term for the kept lights (0 when off or without an estimate)."""
-        tone, light = self.config.tone, self.inputs.scene_light
-        if not tone.scene_light_prior or light is None:
-            return torch.zeros(())
-        white = torch.as_tensor(light.illuminant.white, dtype=torch.float32)
-        colour = light_colour_term(self.scene.lights[self.decoupling.kept], white, front_directions())
-        return tone.weight * colour / tone.colour_sigma**2
-
-    def key_light_exposure(self, frame: int, rendered: FrameRender) -> torch.Tensor:
-        """The scene-light level term of one frame: the brightest light's level on the cheeks and forehead
-        (0 when off)."""
-        tone, light = self.config.tone, self.inputs.scene_light
-        if (not tone.scene_light_prior or light is None or light.regions is None or rendered.normals is None):
-            return torch.zeros(())
-        level = key_light_level(self.scene.lights[self.decoupling.kept], rendered.normals, light.regions[frame])
-        target = float(light.illuminant.white @ LUMINANCE)
-        return tone.weight * exposure_term(level, target) / tone.exposure_sigma**2
-
-    def render_frame(self, frame: int, textures: Textures, refresh_shadows: bool,
-                     geometry: FrameGeometry | None = None) -> FrameRender:
-        geometry = geometry or self.geometry(frame)
-        transfer = self._transfer(frame, geometry.mesh, refresh_shadows)
-        output = render_frame(self.renderer, geometry.mesh, geometry.camera, textures,
-                              self.scene.lights[self.decoupling.kept], transfer)
-        return self.compose(frame, output)
-
-    def compose(self, frame: int, output: RenderOutput, face_region: torch.Tensor | None = None) -> FrameRender:
-        """The frame's render from its per-light images: f's masks, and M_o (``face_region`` when frozen)."""
-        light_masks = self.decoupling.light_masks(frame, output.mask)
-        probability = None
-        if face_region is None:
-            probability = self.decoupling.region_probability(frame, output.mask)
-            face_region = self.decoupling.face_region(frame, output.mask, self.inputs.face_classifier[frame],
-                                                      probability)
-        return FrameRender.of(output, light_masks, face_region, probability)
-
-    def _transfer(self, frame: int, mesh, refresh: bool):
-        if not self.config.render.shadows:
-            return None
-        cache = self.shadow_caches[frame]
-        return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
-
-    def photometric(self, frame: int, rendered: FrameRender) -> torch.Tensor:
-        return photometric_loss(rendered.face, self.target.images[frame], rendered.face_region,
-                                rendered.coverage, blur=self.config.render.render_blur,
-                                form=self.config.decouple.loss_form,
-                                clipped=self.target.clipped[frame] if self.config.decouple.clipped_as_bound else None)
 
 
 class LossTerms:

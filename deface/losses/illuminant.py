@@ -83,3 +83,19 @@ def key_light_level(lights: torch.Tensor, normals: torch.Tensor, region: torch.T
 def exposure_term(level: torch.Tensor, target: float) -> torch.Tensor:
     """Squared log-ratio of a light level to its target."""
     return (torch.log(_positive(level)) - math.log(target)).pow(2)
+
+
+def scene_light_colour_loss(lights: torch.Tensor, white, weight: float, sigma: float) -> torch.Tensor:
+    """The scene-light colour term of the kept ``lights`` [K, B*B, 3] against the scene's ``white`` [3] (linear
+    RGB): ``weight`` x :func:`light_colour_term` over the front hemisphere / ``sigma``²."""
+    white = torch.as_tensor(white, dtype=torch.float32)
+    return weight * light_colour_term(lights, white, front_directions()) / sigma**2
+
+
+def scene_light_level_loss(lights: torch.Tensor, normals: torch.Tensor, region: torch.Tensor, white,
+                           weight: float, sigma: float) -> torch.Tensor:
+    """The scene-light level term of one frame: ``weight`` x :func:`exposure_term` of the brightest light's level
+    on ``region`` [H, W] (the cheeks and forehead; ``normals`` [H, W, 3]) against the luminance of the scene's
+    ``white`` [3] / ``sigma``²."""
+    level = key_light_level(lights, normals, region)
+    return weight * exposure_term(level, float(white @ LUMINANCE)) / sigma**2

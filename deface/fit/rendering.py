@@ -1,0 +1,86 @@
+"""How stages 2 and 3 render a frame of a :class:`~deface.fit.state.StageContext` and score it: the frame's
+render through the one render path (deface/render/frame.py) composed with f's masks and M_o, and the terms
+every stage adds per frame (L_pho, the scene-light terms; their maths in deface/losses/).
+
+Shapes: H x W working pixels, K kept lights with B*B SH coefficients per colour.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from deface.fit.scene import FrameGeometry
+from deface.fit.state import FrameRender, StageContext
+from deface.losses.illuminant import scene_light_colour_loss, scene_light_level_loss
+from deface.losses.photometric import photometric_loss
+from deface.render.frame import render_frame
+from deface.render.mesh import Mesh, Textures
+from deface.render.renderer import RenderOutput, ShadowTransfer
+
+
+def albedo_textures(context: StageContext, size: int | None = None) -> Textures:
+    """The albedo model's maps at the fitted coefficients (and tone, when the tone is free), ``size`` texels
+    square (default: ``config.stage2_texture_size``)."""
+    size = size or context.config.stage2_texture_size
+    ita = context.scene.tone if context.config.tone.free_tone else None
+    diffuse, specular = context.model.albedo.textures(context.scene.albedo, size, ita)
+    roughness = torch.full((*diffuse.shape[:2], 1), context.model.albedo.roughness_default)
+    return Textures(diffuse.clamp(0, 1), specular.clamp(0, 1), roughness)
+
+
+def render_posed(context: StageContext, frame: int, textures: Textures, refresh_shadows: bool,
+                 geometry: FrameGeometry | None = None) -> FrameRender:
+    """Stage 2's render of a frame at the parameters' current values (one sample per pixel), under the kept
+    lights; the shadow transfer refreshed when ``refresh_shadows`` and the mesh moved."""
+    geometry = geometry or context.geometry(frame)
+    transfer = _transfer(context, frame, geometry.mesh, refresh_shadows)
+    output = render_frame(context.renderer, geometry.mesh, geometry.camera, textures,
+                          context.scene.lights[context.decoupling.kept], transfer)
+    return compose(context, frame, output)
+
+
+def compose(context: StageContext, frame: int, output: RenderOutput,
+            face_region: torch.Tensor | None = None) -> FrameRender:
+    """The frame's render from its per-light images: f's masks, and M_o (``face_region`` when frozen)."""
+    decoupling = context.decoupling
+    light_masks = decoupling.light_masks(frame, output.mask)
+    probability = None
+    if face_region is None:
+        probability = decoupling.region_probability(frame, output.mask)
+        face_region = decoupling.face_region(frame, output.mask, context.inputs.face_classifier[frame], probability)
+    return FrameRender.of(output, light_masks, face_region, probability)
+
+
+def _transfer(context: StageContext, frame: int, mesh: Mesh, refresh: bool) -> ShadowTransfer | None:
+    if not context.config.render.shadows:
+        return None
+    cache = context.shadow_caches[frame]
+    return cache.get(mesh) if refresh or cache.transfer is None else cache.transfer
+
+
+def photometric(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:
+    """L_pho of a frame's render against its photo, over M_o."""
+    config = context.config
+    return photometric_loss(rendered.face, context.target.images[frame], rendered.face_region, rendered.coverage,
+                            blur=config.render.render_blur, form=config.decouple.loss_form,
+                            clipped=context.target.clipped[frame] if config.decouple.clipped_as_bound else None)
+
+
+def scene_light_colour(context: StageContext) -> torch.Tensor:
+    """The scene-light colour term of the kept lights (0 when off or without an estimate)."""
+    tone, light = context.config.tone, context.inputs.scene_light
+    if not tone.scene_light_prior or light is None:
+        return torch.zeros(())
+    lights = context.scene.lights[context.decoupling.kept]
+    return scene_light_colour_loss(lights, light.illuminant.white, tone.weight, tone.colour_sigma)
+
+
+def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:
+    """The scene-light level term of one frame: the brightest light's level on the cheeks and forehead (0 when
+    off)."""
+    tone, light = context.config.tone, context.inputs.scene_light
+    if not tone.scene_light_prior or light is None or light.regions is None or rendered.normals is None:
+        return torch.zeros(())
+    lights = context.scene.lights[context.decoupling.kept]
+    return scene_light_level_loss(lights, rendered.normals, light.regions[frame], light.illuminant.white,
+                                  tone.weight, tone.exposure_sigma)
