@@ -45,7 +45,7 @@ def main() -> None:
         started = time.perf_counter()
         result = fit_target(FitTarget([face.image_srgb], [face.landmarks], 1.0),
                             override(presets.get(name), **SHORT), log=FitLog(quiet=True))
-        kept = result.kept
+        kept = result.lights.kept
         print(f"| {name} | {len(kept)} | {diffuse_error(face, result.textures.diffuse, face.shadow):.3f} | "
               f"{diffuse_error(face, result.textures.diffuse, lit):.3f} | {time.perf_counter() - started:.1f} s |")
 

@@ -321,7 +321,8 @@ def test_nan_in_stage2_loss_is_recovered_and_recorded(tiny_fit, monkeypatch):
     monkeypatch.setattr(stage2, "_stage2_loss", poisoned)
     log = FitLog(quiet=True)
     result = fit_target(FitTarget([face.image_srgb], [face.landmarks], 1.0), config, log=log)
-    assert all(torch.isfinite(t).all() for t in (result.identity, result.lights, result.albedo, result.expression))
+    assert all(torch.isfinite(t).all() for t in (result.pose.identity, result.lights.sh, result.albedo.coefficients,
+                                                  result.pose.expression))
     assert torch.isfinite(result.textures.diffuse).all()
     assert [n for n in log.notes if n.startswith("stage 2: non-finite loss or parameters at step 3")]
 

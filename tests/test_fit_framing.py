@@ -274,13 +274,13 @@ def test_a_small_face_in_a_large_canvas_gives_the_maps_of_the_face_cropped_by_ha
     image, landmarks = _by_hand(canvas, (x - 55, y - 60, x + 60, y + 62))
     hand = fit_target(frame_target([image], [landmarks], _config()), _config(), log=FitLog(quiet=True))
     assert hand.framing.is_whole  # the hand crop is tighter than the automatic one: all of it is fitted
-    seen = (cropped_fit.seen > 0.5) & (hand.seen > 0.5)
+    seen = (cropped_fit.texels.seen > 0.5) & (hand.texels.seen > 0.5)
     assert seen.sum() > 1500
     matched = _uv_psnr(cropped_fit.textures.diffuse, hand.textures.diffuse, seen)
     whole = _config(resolution=128, **{"crop.enabled": False})
     before = fit_target(frame_target([canvas.image], [canvas.landmarks], whole), whole, log=FitLog(quiet=True))
     assert before.framing.is_whole and before.framing.scale == pytest.approx(0.5)
-    unmatched = _uv_psnr(before.textures.diffuse, hand.textures.diffuse, seen & (before.seen > 0.5))
+    unmatched = _uv_psnr(before.textures.diffuse, hand.textures.diffuse, seen & (before.texels.seen > 0.5))
     assert matched > 33.0 and matched > unmatched + 1.5, (matched, unmatched)
 
 

@@ -105,8 +105,8 @@ def test_load_fit_re_renders_the_fit_within_one_level(written):
         reference = np.asarray(Image.open(written / name)).astype(int)
         assert np.abs(ours - reference).max() <= 1, name
     params = json.loads((written / "params.json").read_text())
-    assert list(fit.kept) == params["lights"]["kept"]
-    assert np.allclose(fit.identity.numpy(), params["identity"])
+    assert list(fit.lights.kept) == params["lights"]["kept"]
+    assert np.allclose(fit.pose.identity.numpy(), params["identity"])
 
 
 def test_an_older_output_says_what_is_missing(written, tmp_path):
@@ -188,12 +188,12 @@ def test_relight_command_writes_composite_face_and_lights(written, tmp_path):
                                           "--rotate-light", "30"])
         assert result.exit_code == 0, result.output
         assert (out / "render.png").is_file() and (out / "render_face.png").is_file()
-        assert np.load(out / "lights.npy").shape[1:] == (fit.bands**2, 3)
+        assert np.load(out / "lights.npy").shape[1:] == (fit.lights.bands**2, 3)
     own = CliRunner().invoke(app, ["relight", str(written), "-o", str(tmp_path / "own"), "--light",
                                    str(written / "params.json")])
     assert own.exit_code == 0
     # the fit's own lights, summed without masks, equal the fit's render where one light was kept
-    if len(fit.kept) == 1:
+    if len(fit.lights.kept) == 1:
         face = np.asarray(Image.open(tmp_path / "own" / "render_face.png"))[..., :3].astype(int)
         assert np.abs(face - np.asarray(Image.open(written / "render_face.png")).astype(int)).max() <= 1
     bad = CliRunner().invoke(app, ["relight", str(written), "-o", str(tmp_path / "x"), "--light", "candle"])
@@ -202,7 +202,7 @@ def test_relight_command_writes_composite_face_and_lights(written, tmp_path):
 
 def test_turntable_starts_at_the_fit_view_and_writes_video(written, tmp_path):
     fit = load_fit(written)
-    lights = light_sources.preset_lights("studio", fit.bands)
+    lights = light_sources.preset_lights("studio", fit.lights.bands)
     first = turntable_frames(fit, lights, yaw_range=60.0, count=4)
     relit = fit.render(lights=lights)[0]
     alpha = relit.coverage[..., None]

@@ -114,4 +114,4 @@ def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
     except OSError as error:
         raise OutputError(f"{folder}: cannot write ({error.strerror or one_line(error)}); what was there "
                           "before is unchanged") from error
-    return tuple(int(k) for k in result.kept), result.skin_tone()
+    return tuple(int(k) for k in result.lights.kept), result.skin_tone()

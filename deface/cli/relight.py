@@ -47,7 +47,7 @@ def relight_command(
     from deface.relight.render import write_renders
 
     loaded = _load(fit, models)
-    lights = _lights(light, loaded.bands, rotate_light, exposure)
+    lights = _lights(light, loaded.lights.bands, rotate_light, exposure)
     write_renders(loaded, loaded.render(lights=lights), _folder(output), lights)
     console.print(f"{fit}: relit ({light}) -> {output}")
 
@@ -73,7 +73,7 @@ def turntable_command(
         report_error(ValueError("--frames must be 2-1000, --scale 0.25-8, --fps > 0, and -o end in .mp4 or .gif"))
         raise typer.Exit(EXIT_USAGE)
     loaded = _load(fit, models)
-    lights = _lights(light, loaded.bands, rotate_light, exposure)
+    lights = _lights(light, loaded.lights.bands, rotate_light, exposure)
     try:
         images = turntable_frames(loaded, lights, yaw, frames, frame, scale)
         write_animation(images, output, fps)

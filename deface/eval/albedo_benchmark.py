@@ -177,7 +177,7 @@ def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_
     matched = measures.gain_matched(fitted, truth, reference)
     save_png(result_dir / "albedo_difference.png", measures.difference_image(matched, truth, shown), srgb=False)
     return {"scores": score_fit(fitted, truth, shown, masks), "seconds": seconds,
-            "light": render.light, "kept_lights": len(result.kept_lights)}
+            "light": render.light, "kept_lights": len(result.lights.kept)}
 
 
 def run_albedo_benchmark(folder: Path, out_dir: Path, variants: dict[str, FitConfig], jobs: int = 2,

@@ -93,7 +93,7 @@ def evaluate_pair(pair: Pair, config: FitConfig, folder: Path, models_dir=None, 
 def uv_scores(source: FitOutput, target: FitOutput, shadow: np.ndarray | None = None) -> dict:
     """The two fits' diffuse maps compared in UV space, their speckle (mean of both fits), and with the source
     photo's shadow mask ``shadow`` [H, W] the colour its edge left in the source's map (``edge_fringe``)."""
-    region = both_seen(source.seen, target.seen)
+    region = both_seen(source.texels.seen, target.texels.seen)
     linear = [_np(fit.textures.diffuse).clip(0, 1) for fit in (source, target)]
     details = [fit_detail(fit) for fit in (source, target)]
     scores = {"consistency": uv_consistency(*(linear_to_srgb(m) for m in linear), region),
@@ -101,7 +101,7 @@ def uv_scores(source: FitOutput, target: FitOutput, shadow: np.ndarray | None = 
               "detail": float(np.mean([d["detail"] for d in details]))}
     if shadow is not None:
         working = _working_frame(shadow, source.framing)
-        scores["edge_fringe"] = edge_fringe(*linear, unwrap(working[..., None], source.views[0])[..., 0], region)
+        scores["edge_fringe"] = edge_fringe(*linear, unwrap(working[..., None], source.texels.views[0])[..., 0], region)
     return scores
 
 
@@ -113,7 +113,7 @@ def _working_frame(mask: np.ndarray, framing) -> np.ndarray:
 def fit_detail(result: FitOutput) -> dict[str, float]:
     """Speckle and detail ratio of a fit's diffuse map against its first frame read in UV, over the texels
     that frame saw (deface/eval/uv_measure.py)."""
-    view = result.views[0]
+    view = result.texels.views[0]
     region = view.seen(_np(result.frames[0].face_region)) >= SEEN
     photo, diffuse = unwrap(result.frames[0].photo.numpy(), view), _np(result.textures.diffuse)
     return {"speckle": speckle(diffuse, photo, region), "detail": detail_ratio(diffuse, photo, region)}

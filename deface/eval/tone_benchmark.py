@@ -119,11 +119,11 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
     to_srgb = lambda t: linear_to_srgb(t.detach().clamp(0, 1).numpy())  # noqa: E731
     tone = result.skin_tone()
     return {"albedo_ita": texture_ita(to_srgb(result.textures.diffuse)),
-            "initial_ita": texture_ita(to_srgb(result.initial_textures.diffuse)),
+            "initial_ita": texture_ita(to_srgb(result.texels.initial.diffuse)),
             "photo_ita": photo.ita, "photo_pixels": photo.pixels, "seconds": seconds,
             **fit_detail(result),
-            "tone": result.tone, "illuminant": result.illuminant, "ita_interval": tone["ita_interval"],
-            "ita_interval_2sigma": tone["ita_interval_2sigma"]}
+            "tone": result.albedo.tone, "illuminant": None if result.illuminant is None else result.illuminant.record(),
+            "ita_interval": tone["ita_interval"], "ita_interval_2sigma": tone["ita_interval_2sigma"]}
 
 
 def run_tone_benchmark(folder: Path, out_dir: Path, preset: str, baseline: bool, schedule: dict,

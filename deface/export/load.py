@@ -16,10 +16,20 @@ import torch
 from deface.export.outputs import PARAMS_FORMAT
 from deface.fit.config import FitConfig, from_dict
 from deface.fit.framing import Framing
-from deface.fit.output import FitOutput, OutputFrame, RunRecord, StoredPose, frozen_geometry
+from deface.fit.output import (
+    FitAlbedo,
+    FitLights,
+    FitOutput,
+    FitPose,
+    FitTexels,
+    OutputFrame,
+    RunRecord,
+    frozen_geometry,
+)
 from deface.fit.state import fit_renderer
 from deface.fit.texels import frame_views
 from deface.models.registry import load_face_model
+from deface.priors.illuminant import IlluminantEstimate
 from deface.render.frame import cast_frame
 from deface.render.mesh import Textures
 from deface.render.renderer import ShadowTransfer
@@ -38,8 +48,8 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     arrays, params = _read(folder)
     config = _config(folder, params)
     model = load_face_model(config.model, models_dir)
-    pose = StoredPose(*(torch.as_tensor(arrays[name], dtype=torch.float32)
-                        for name in ("identity", "expression", "rotation", "translation", "focal")))
+    pose = FitPose(*(torch.as_tensor(arrays[name], dtype=torch.float32)
+                     for name in ("identity", "expression", "rotation", "translation", "focal")))
     renderer = fit_renderer(config)
     framing = _framing(params)
     frames = []
@@ -59,10 +69,14 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     views = tuple(frame_views(model, frames, textures.diffuse.shape[0]))
     seen, confidence = (arrays[name].astype(np.float32) if name in arrays else None
                         for name in ("texture_seen", "confidence"))
-    return FitOutput(model, config, tuple(frames), pose.identity, pose.expression, pose.rotation,
-                     pose.translation, pose.focal, _tensor(arrays["albedo"]), _tone(params),
-                     _tensor(arrays["lights"]), tuple(int(k) for k in arrays["kept"]), textures, None,
-                     seen, confidence, views, params.get("illuminant"), framing, None, record, renderer)
+    illuminant = params.get("illuminant")
+    return FitOutput(
+        model=model, config=config, frames=tuple(frames), pose=pose,
+        albedo=FitAlbedo(_tensor(arrays["albedo"]), _tone(params)),
+        lights=FitLights(_tensor(arrays["lights"]), tuple(int(k) for k in arrays["kept"])),
+        textures=textures, texels=FitTexels(None, seen, confidence, views),
+        illuminant=None if illuminant is None else IlluminantEstimate.from_record(illuminant),
+        framing=framing, kept_frames=None, record=record, renderer=renderer)
 
 
 def _read(folder: Path) -> tuple[dict[str, np.ndarray], dict]:

@@ -56,8 +56,8 @@ def _write_textures(result: FitOutput, folder: Path) -> None:
     save_png(folder / TEXTURE_FILES["diffuse"], _np(textures.diffuse), srgb=True)
     save_png(folder / TEXTURE_FILES["specular"], _np(textures.specular), srgb=False)
     save_png(folder / TEXTURE_FILES["roughness"], _np(textures.roughness), srgb=False)
-    if result.confidence is not None:
-        save_png(folder / "textures" / "confidence.png", result.confidence[..., None], srgb=False)
+    if result.texels.confidence is not None:
+        save_png(folder / "textures" / "confidence.png", result.texels.confidence[..., None], srgb=False)
 
 
 def _write_mesh(result: FitOutput, folder: Path) -> None:
@@ -75,23 +75,23 @@ def _write_renders(result: FitOutput, renders: list, folder: Path) -> None:
         save_png(base / "render.png", _np(result.composite_photo(rendered, frame)))
         save_png(base / "render_face.png", _np(rendered.face))
         save_png(base / "masks" / "face.png", _np(rendered.face_region), srgb=False)
-        for slot, light in enumerate(result.kept):
+        for slot, light in enumerate(result.lights.kept):
             save_png(base / "lights" / f"{light}.png", _np(rendered.light_images[slot]))
             save_png(base / "masks" / f"light_{light}.png", _np(rendered.light_masks[slot]), srgb=False)
 
 
 def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) -> None:
     config, model = result.config, result.model
-    kept = list(result.kept)
-    lights = _np(result.lights)
+    kept = list(result.lights.kept)
+    lights = _np(result.lights.sh)
     params = {
         "format": "deface-params/1",
         "model": {"name": model.name, "expression_names": list(model.expression_names),
                   "expression_prior": model.expression_prior},
-        "identity": _np(result.identity).tolist(),
-        "expression": _np(result.expression).tolist(),
-        "pose": {"rotation_axis_angle": _np(result.rotation).tolist(),
-                 "translation_cm": _np(result.translation).tolist(),
+        "identity": _np(result.pose.identity).tolist(),
+        "expression": _np(result.pose.expression).tolist(),
+        "pose": {"rotation_axis_angle": _np(result.pose.rotation).tolist(),
+                 "translation_cm": _np(result.pose.translation).tolist(),
                  "convention": "model -> camera; camera x right, y down, z forward (OpenCV)"},
         "camera": _camera(result, record.get("file_size")),
         "crop": result.framing.record(),
@@ -101,14 +101,14 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
         "textures": {"size": int(result.textures.diffuse.shape[0]),
                      "chosen_by": "config" if config.texture_size is not None else
                      "the face's pixels (texture_size none, texture_size_range)"},
-        "albedo_coefficients": _np(result.albedo).tolist(),
-        "skin_tone": {"ita": result.tone if config.tone.free_tone else None, "free": config.tone.free_tone,
+        "albedo_coefficients": _np(result.albedo.coefficients).tolist(),
+        "skin_tone": {"ita": result.albedo.tone if config.tone.free_tone else None, "free": config.tone.free_tone,
                       "convention": "ITA degrees on the albedo model's tone axis",
                       **result.skin_tone(),
                       "interval_convention": "texture_ita: the diffuse map's cheeks and forehead (deface.models.ita); "
                                           "ita_interval: the same with the map's level over the white level's "
                                           "one-sigma spread (illuminant.level_sigma)"},
-        "illuminant": result.illuminant,
+        "illuminant": None if result.illuminant is None else result.illuminant.record(),
         "frames": _frames(record.get("frames", [0]), result.kept_frames),
         "preset": config.preset,
         "config": to_dict(config),
@@ -132,11 +132,11 @@ def _camera(result: FitOutput, file_size: list[int] | None = None) -> dict:
     framing = result.framing
     width, height = framing.input_size
     working_width, working_height = framing.size
-    focal = float(result.focal) / framing.scale
+    focal = float(result.pose.focal) / framing.scale
     camera = {"focal_px": focal, "width": width, "height": height,
               "principal_point": [width / 2, height / 2], "working_scale": framing.scale,
               "pixels": "the input frame's as decoded (x right, y down, pixel centres at +0.5)",
-              "working": {"focal_px": float(result.focal), "width": working_width, "height": working_height,
+              "working": {"focal_px": float(result.pose.focal), "width": working_width, "height": working_height,
                           "principal_point": [round(v, 4) for v in framing.principal_point]}}
     if file_size is not None and tuple(file_size) != (width, height):
         ratio = max(file_size) / max(width, height)
@@ -158,18 +158,19 @@ def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
         "light_masks": np.stack([_np(r.light_masks) for r in renders]).astype(np.float32),
         "face_region": np.stack([_np(r.face_region) for r in renders]).astype(np.float32),
         "landmarks_2d": np.stack([frame.landmarks for frame in frames]),
-        "identity": _np(result.identity), "expression": _np(result.expression),
-        "rotation": _np(result.rotation), "translation": _np(result.translation), "focal": _np(result.focal),
-        "albedo": _np(result.albedo), "lights": _np(result.lights), "kept": np.asarray(result.kept, dtype=np.int64),
+        "identity": _np(result.pose.identity), "expression": _np(result.pose.expression),
+        "rotation": _np(result.pose.rotation), "translation": _np(result.pose.translation),
+        "focal": _np(result.pose.focal), "albedo": _np(result.albedo.coefficients), "lights": _np(result.lights.sh),
+        "kept": np.asarray(result.lights.kept, dtype=np.int64),
         "face_classifier": np.stack([_np(frame.face_classifier) for frame in frames]).astype(np.float32),
         "photos_srgb": np.stack([frame.photo_srgb for frame in frames]).astype(np.float16),
     }
     if frames[0].scene_srgb is not None:  # the photo around the crop, for render.png (8 bits, as written)
         arrays["scene_srgb"] = np.stack([to_uint8(frame.scene_srgb, srgb=False) for frame in frames])
-    if result.seen is not None:
-        arrays["texture_seen"] = result.seen.astype(np.float16)
-    if result.confidence is not None:
-        arrays["confidence"] = result.confidence.astype(np.float16)
+    if result.texels.seen is not None:
+        arrays["texture_seen"] = result.texels.seen.astype(np.float16)
+    if result.texels.confidence is not None:
+        arrays["confidence"] = result.texels.confidence.astype(np.float16)
     if frames[0].transfer is not None:
         arrays["transfer_occluded"] = np.stack([_np(frame.transfer.occluded) for frame in frames])
         arrays["transfer_visibility"] = np.stack([_np(frame.transfer.visibility) for frame in frames])

@@ -23,6 +23,7 @@ from deface.fit.state import FrameRender, StageContext
 from deface.io.images import srgb_to_linear
 from deface.models.base import FaceModel
 from deface.models.ita import texture_tone
+from deface.priors.illuminant import IlluminantEstimate
 from deface.render.camera import Camera
 from deface.render.frame import FrameCast, cast_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
@@ -81,39 +82,80 @@ class OutputFrame:
 
 
 @dataclass(frozen=True)
+class FitPose:
+    """The fitted shape and pose: what :func:`frozen_geometry` reads."""
+
+    identity: torch.Tensor  # [Ki]
+    expression: torch.Tensor  # [T, Ke]
+    rotation: torch.Tensor  # [T, 3] axis-angle, model -> camera
+    translation: torch.Tensor  # [T, 3] cm
+    focal: torch.Tensor  # [] pixels at working resolution
+
+    def camera(self, frame: int, width: int, height: int,
+               principal_point: tuple[float, float] | None = None) -> Camera:
+        return Camera(self.focal, self.rotation[frame], self.translation[frame], width, height, principal_point)
+
+
+@dataclass(frozen=True)
+class FitAlbedo:
+    """Where the albedo model put the person (T^0's source)."""
+
+    coefficients: torch.Tensor  # [Ka] albedo-model coefficients
+    tone: float  # ITA degrees on the albedo model's tone axis (its start value when the tone is not free)
+
+
+@dataclass(frozen=True)
+class FitLights:
+    """The fitted lights: every initial light's SH (stage-3 values), and those ACE kept."""
+
+    sh: torch.Tensor  # [n, B*B, 3]
+    kept: tuple[int, ...]  # indices of the lights ACE kept; only these are rendered
+
+    @property
+    def kept_sh(self) -> torch.Tensor:
+        """[K, B*B, 3] the lights the fit renders with."""
+        return self.sh[list(self.kept)]
+
+    @property
+    def bands(self) -> int:
+        return int(round(self.sh.shape[1] ** 0.5))
+
+
+@dataclass(frozen=True)
+class FitTexels:
+    """What the frames tell about each texel of the maps (deface/fit/texels.py)."""
+
+    initial: Textures | None  # T^0 from the albedo model (None when loaded from files)
+    seen: np.ndarray | None  # [Ht, Wt] how squarely some frame saw each texel inside h (None: unknown)
+    confidence: np.ndarray | None  # [Ht, Wt] how well the frames constrain each texel (None: unknown)
+    views: tuple[TexelView, ...]  # per frame: where each texel lands and how it is seen
+
+
+@dataclass(frozen=True)
 class FitOutput:
     """A finished fit. ``render`` re-renders it with other textures, lights or a camera."""
 
     model: FaceModel
     config: FitConfig  # the config the fit ran with
     frames: tuple[OutputFrame, ...]  # T
-    identity: torch.Tensor  # [Ki]
-    expression: torch.Tensor  # [T, Ke]
-    rotation: torch.Tensor  # [T, 3] axis-angle, model -> camera
-    translation: torch.Tensor  # [T, 3] cm
-    focal: torch.Tensor  # [] pixels at working resolution
-    albedo: torch.Tensor  # [Ka] albedo-model coefficients
-    tone: float  # ITA degrees on the albedo model's tone axis (its start value when the tone is not free)
-    lights: torch.Tensor  # [n, B*B, 3] every light's SH (stage-3 values); only ``kept`` are used
-    kept: tuple[int, ...]  # indices of the lights ACE kept
+    pose: FitPose
+    albedo: FitAlbedo
+    lights: FitLights
     textures: Textures  # the final UV maps
-    initial_textures: Textures | None  # T^0 from the albedo model (None when loaded from files)
-    seen: np.ndarray | None  # [Ht, Wt] how squarely some frame saw each texel inside h (None: unknown)
-    confidence: np.ndarray | None  # [Ht, Wt] how well the frames constrain each texel (None: unknown)
-    views: tuple[TexelView, ...]  # per frame: where each texel lands and how it is seen
-    illuminant: dict | None  # the scene's illuminant estimate (its record), None when not estimated
+    texels: FitTexels
+    illuminant: IlluminantEstimate | None  # the scene's illuminant as recorded (None when not estimated)
     framing: Framing  # where the working frames lie in the input's (crop, scale, principal point)
     kept_frames: list[int] | None  # positions of the fitted frames among the input's (None: all)
     record: RunRecord
-    renderer: Renderer  # the fit's renderer settings (bands, shadows, rays, seed)
+    renderer: Renderer  # the fit's renderer (its settings, bands and seed)
 
     def skin_tone(self) -> dict:
         """The diffuse map's ITA and its interval over the white level's spread
         (:func:`~deface.models.ita.texture_tone`; no interval without a white level: a preset without the
         scene-light prior, or a fit saved before it)."""
-        sigma = (self.illuminant or {}).get("level_sigma")
-        return {**texture_tone(self.textures.diffuse.detach().numpy(), sigma),
-                "light_level": (self.illuminant or {}).get("source")}
+        illuminant = self.illuminant
+        return {**texture_tone(self.textures.diffuse.detach().numpy(), illuminant and illuminant.level_sigma),
+                "light_level": illuminant and illuminant.source}
 
     @property
     def num_frames(self) -> int:
@@ -129,15 +171,6 @@ class FitOutput:
         """(W, H) working resolution."""
         camera = self.frames[0].geometry.camera
         return camera.width, camera.height
-
-    @property
-    def kept_lights(self) -> torch.Tensor:
-        """[K, B*B, 3] the lights the fit renders with."""
-        return self.lights[list(self.kept)]
-
-    @property
-    def bands(self) -> int:
-        return int(round(self.lights.shape[1] ** 0.5))
 
     @classmethod
     @torch.no_grad()
@@ -155,21 +188,24 @@ class FitOutput:
                 context.inputs.face_classifier[frozen.index], rendered.light_masks.detach(),
                 rendered.face_region.detach(), np.asarray(target.landmarks[frozen.index].points),
                 None if target.scene_srgb is None else np.asarray(target.scene_srgb[frozen.index], np.float32)))
-        tone = float(scene.tone.detach())
         light = context.inputs.scene_light
+        pose = FitPose(*(p.detach().clone() for p in (scene.identity, scene.expression, scene.rotation,
+                                                      scene.translation, scene.focal)))
         return cls(
-            context.model, config, tuple(frames), *(p.detach().clone() for p in (
-                scene.identity, scene.expression, scene.rotation, scene.translation, scene.focal, scene.albedo)),
-            tone, scene.lights.detach().clone(), tuple(context.decoupling.kept), finished.textures, stage3.initial,
-            finished.seen, finished.confidence, tuple(stage3.views),
-            light.illuminant.record() if light is not None else None, target.framing, target.kept_frames, record,
-            context.renderer)
+            model=context.model, config=config, frames=tuple(frames), pose=pose,
+            albedo=FitAlbedo(scene.albedo.detach().clone(), float(scene.tone.detach())),
+            lights=FitLights(scene.lights.detach().clone(), tuple(context.decoupling.kept)),
+            textures=finished.textures,
+            texels=FitTexels(stage3.initial, finished.seen, finished.confidence, tuple(stage3.views)),
+            illuminant=None if light is None else IlluminantEstimate.from_record(light.illuminant.record()),
+            framing=target.framing, kept_frames=target.kept_frames, record=record, renderer=context.renderer)
 
     def export_vertices(self) -> np.ndarray:
         """[V, 3] cm: a photo's fitted mesh, or a clip's identity with a neutral expression."""
-        expression = self.expression[0] if self.num_frames == 1 else torch.zeros_like(self.expression[0])
+        expression = self.pose.expression
+        expression = expression[0] if self.num_frames == 1 else torch.zeros_like(expression[0])
         with torch.no_grad():
-            return self.model.vertices(self.identity, expression).numpy()
+            return self.model.vertices(self.pose.identity, expression).numpy()
 
     @torch.no_grad()
     def render(self, textures: Textures | None = None, lights: torch.Tensor | None = None,
@@ -187,7 +223,7 @@ class FitOutput:
         """
         textures = textures or self.textures
         own_lights = lights is None
-        lights = self.kept_lights if own_lights else lights.to(torch.float32)
+        lights = self.lights.kept_sh if own_lights else lights.to(torch.float32)
         renders = []
         for index, frame in enumerate(self.frames):
             view = camera(index) if callable(camera) else camera
@@ -219,22 +255,7 @@ class FitOutput:
         return photo
 
 
-@dataclass(frozen=True)
-class StoredPose:
-    """The scene-parameter fields :func:`frame_geometry` reads, from a frozen fit."""
-
-    identity: torch.Tensor
-    expression: torch.Tensor
-    rotation: torch.Tensor
-    translation: torch.Tensor
-    focal: torch.Tensor
-
-    def camera(self, frame: int, width: int, height: int,
-               principal_point: tuple[float, float] | None = None) -> Camera:
-        return Camera(self.focal, self.rotation[frame], self.translation[frame], width, height, principal_point)
-
-
-def frozen_geometry(model: FaceModel, pose: StoredPose, frame: int, framing: Framing) -> FrameGeometry:
+def frozen_geometry(model: FaceModel, pose: FitPose, frame: int, framing: Framing) -> FrameGeometry:
     """A frame's detached geometry from stored parameters (what stage 3 froze), at the working frames of
     ``framing``."""
     topology = topology_tensors(model)

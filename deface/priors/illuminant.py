@@ -185,6 +185,15 @@ class IlluminantEstimate:
                 "scene_pixels": self.scene_pixels, "level_sigma": round(self.level_sigma, 4),
                 "orientation": round(self.orientation, 4), "detail": self.detail}
 
+    @classmethod
+    def from_record(cls, record: dict) -> IlluminantEstimate:
+        """The estimate as :meth:`record` wrote it (rounded, without the scene's reading); fields an older record
+        lacks take their defaults."""
+        return cls(np.asarray(record["white"], dtype=np.float64), float(record["cct"]), record["source"],
+                   float(record.get("colour_weight", 0.0)), int(record.get("scene_pixels", 0)),
+                   float(record.get("level_sigma", 0.0)), float(record.get("orientation", 1.0)),
+                   record.get("detail", ""))
+
     def facing_corrected(self, ratio: float) -> IlluminantEstimate:
         """A card's reading, or the scene's before it is combined with the photo's white point, times ``ratio``:
         the light a surface facing the key light gets over what one facing the camera gets. Any other estimate

@@ -67,23 +67,24 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
     images = folder / REPORT_DIR
     images.mkdir(parents=True, exist_ok=True)
     base = "" if fit.num_frames == 1 else "frames/000/"
-    for slot, light in enumerate(fit.kept):
-        save_png(images / f"sphere_{light}.png", lit_sphere(fit.kept_lights[slot]))
-    neutral = fit.render(lights=white_light(fit.bands))[0]
+    for slot, light in enumerate(fit.lights.kept):
+        save_png(images / f"sphere_{light}.png", lit_sphere(fit.lights.kept_sh[slot]))
+    neutral = fit.render(lights=white_light(fit.lights.bands))[0]
     save_png(images / "neutral.png", neutral.face.numpy())
     save_png(images / "input.png", fit.frames[0].photo_srgb, srgb=False)
-    write_animation(turntable_frames(fit, preset_lights("studio", fit.bands), 90.0, TURNTABLE_FRAMES),
+    write_animation(turntable_frames(fit, preset_lights("studio", fit.lights.bands), 90.0, TURNTABLE_FRAMES),
                     images / "turntable.gif", fps=8)
     curves = _loss_curves(fit, images / "losses.png")
     lights = "".join(
         f'<figure><img src="{REPORT_DIR}/sphere_{k}.png" width="{SPHERE_SIZE}"><img src="{base}masks/light_{k}.png" '
-        f'height="{SPHERE_SIZE}"><figcaption>light {k}: sphere and mask M_L</figcaption></figure>' for k in fit.kept)
+        f'height="{SPHERE_SIZE}"><figcaption>light {k}: sphere and mask M_L</figcaption></figure>'
+        for k in fit.lights.kept)
     body = f"""<h1>deface fit {html.escape(name)}</h1>
 <h2>Input and result</h2>
 <div class="row">{_figure(f"{REPORT_DIR}/input.png", "input: the working image (the crop around the face)")}
 {_figure(f"{base}render.png", "I_out: the fit composited into the photo")}
 {_figure(f"{base}render_face.png", "I_R: the rendered face")}</div>
-<h2>Lights kept ({len(fit.kept)} of {fit.lights.shape[0]}) and the face region</h2>
+<h2>Lights kept ({len(fit.lights.kept)} of {fit.lights.sh.shape[0]}) and the face region</h2>
 <div class="row">{lights}{_figure(f"{base}masks/face.png", "face region M_o")}</div>
 <h2>Textures</h2>
 <div class="row">{_figure("textures/diffuse.png", _diffuse_caption(fit), 256)}
@@ -106,8 +107,7 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
 def _diffuse_caption(fit: FitOutput) -> str:
     """The diffuse map's caption: its skin tone, and the range the unknown light level leaves open."""
     tone = fit.skin_tone()
-    illuminant = fit.illuminant or {}
-    source = illuminant.get("detail") or illuminant.get("source")
+    source = fit.illuminant and (fit.illuminant.detail or fit.illuminant.source)
     where = f"; light level from {source}" if source else ""
     if tone["ita_interval"] is None:
         return f"diffuse (skin ITA {tone['texture_ita']:.0f}{where})"

@@ -44,7 +44,7 @@ class Relighter:
         [H, W, 3] uint8 sRGB; the face alone with its coverage as alpha, [H, W, 4] uint8)."""
         with self._lock:
             fit = self._fit(Path(folder))
-            lights = preset_lights(light, fit.bands)
+            lights = preset_lights(light, fit.lights.bands)
             if turn or lift:
                 lights = rotate_lights(lights, light_rotation(turn, lift))
             rendered = fit.render(lights=lights * 2.0**exposure)[0]
