@@ -294,7 +294,7 @@ def load_config_file(path: Path) -> FitConfig:
 def settings_help() -> str:
     """Every setting as ``path = default: docstring`` (for ``--help``; rich markup escaped)."""
     lines = ["Settings (--set PATH=VALUE; defaults of FitConfig, the presets change some: `deface presets`):"]
-    lines += [f"  {path} = {show_value(default)}: {doc}" for path, default, doc in documentation()]
+    lines += [f"  {path} = {show_value(default)}: {doc}" for path, default, doc in documentation(FitConfig)]
     return escape("\n".join(lines))
 
 
