@@ -1,7 +1,9 @@
 """Fitting configuration: one dataclass per component, every field documented.
 
-Named presets live in :mod:`deface.fit.presets`; the resolved config is written to ``params.json``.
-Weights are named after the paper's Alg. 1 (w0..w7) and Table 6.
+The defaults are the shipped method (the default preset, ``deface``), each field's docstring saying why its value
+was chosen; the other named presets (:mod:`deface.fit.presets`) are differences from them. The resolved config is
+written to ``params.json``; reading and parsing values is :mod:`deface.fit.config_values`. Weights are named after
+the paper's Alg. 1 (w0..w7) and Table 6.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from deface.fit.config_values import (
     split_assignment,
     to_dict,
 )
+from deface.models.albedo_prior import AlbedoPriorConfig
 from deface.models.registry import TONE_AXIS
 from deface.priors.face_region import SkinClassifierConfig
 from deface.priors.illuminant import IlluminantConfig
@@ -35,13 +38,19 @@ __all__ = [  # the value handling lives in config_values; callers import it from
     "supports_free_tone", "to_dict",
 ]
 
+MEAN_SKIN_GREEN = AlbedoPriorConfig().skin_rgb[1]
+"""Linear green of the albedo model's mean skin (Jensen et al. 2001's mean Rd, deface/models/albedo_prior.py): the
+diffuse level stage 3's step and regularisers were tuned at, the level ``learning_rates.stage3_diffuse_level`` and
+``weights.diffuse_level`` refer to."""
+
 
 @dataclass(frozen=True)
 class LightConfig:
     """The light conditions: how many, how many SH bands, how they start."""
 
-    num_lights: int = 5
-    """n: light conditions at the start (ACE may drop some). 1 = a single global light (NextFace)."""
+    num_lights: int = 3
+    """n: light conditions at the start (ACE may drop some): a lit, a shadowed and a spare one (docs/design.md
+    "Default preset"; the paper's 5 in ``paper``). 1 = a single global light (NextFace)."""
     bands: int = 9
     """B: SH bands per light (B*B coefficients per colour)."""
     init: Literal["paper", "code"] = "paper"
@@ -57,26 +66,33 @@ class DecoupleConfig:
 
     light_masks: bool = True
     """Use the light-mask field f (off: every kept light covers the whole face, i.e. one light when n = 1)."""
-    face_region: bool = True
-    """Use the face-region field g (off: M_o is the classifier h itself if `restrict_to_face`, else M_R)."""
+    face_region: bool = False
+    """Use the face-region field g (off: M_o is the classifier h itself if `restrict_to_face`, else M_R). Off: g,
+    trained to match h, also lowers L_pho by shrinking wherever the render fits badly, which left parts of the
+    face unfitted (docs/design.md "Default preset"; the paper's g in ``paper``)."""
     restrict_to_face: bool = True
     """Without g, restrict the photometric loss to the face-region classifier h (NextFace*); else to M_R."""
-    epsilon: float = 0.17
-    """ACE threshold on a light mask's area fraction."""
+    epsilon: float = 0.09
+    """ACE threshold on a light mask's area fraction: the authors' portrait-shadow value. With the paper's 0.17 a
+    shadow covering less of the face than that lost its light at ACE and was baked into the texture
+    (docs/design.md "Default preset")."""
     ace_iteration: int = 100
     """iter_0: the stage-2 iteration at which ACE selects the kept lights."""
     area_normaliser: Literal["render_mask", "image"] = "render_mask"
     """ACE area over the render mask (authors' code) or over all pixels (paper's formula)."""
     loss_form: Literal["code", "paper"] = "code"
     """Formulas of L_area / L_bin / L_seg / L_pho as in the authors' code or as printed in the paper."""
-    clipped_as_bound: bool = False
+    clipped_as_bound: bool = True
     """L_pho takes a clipped channel of the photo (sRGB >= 0.98) as a lower bound, not a value: a render above
-    it costs nothing (deface/losses/photometric.py). Off: the paper's loss."""
+    it costs nothing (deface/losses/photometric.py); a clipped channel says only that the skin is at least that
+    bright, part of keeping the person's skin tone (docs/skin-tone.md). Off: the paper's loss."""
     hidden: tuple[int, ...] = (16, 64, 64)
     """Hidden widths of f (the authors' 3->16->64->64->n)."""
-    fourier_frequencies: int = 0
-    """Octaves of sin/cos(2^k pi p) features on f's input (0 = the authors' raw (x, y, t)); more let the
-    masks follow sharper, thinner shadows."""
+    fourier_frequencies: int = 4
+    """Octaves of sin/cos(2^k pi p) features on f's input; more let the masks follow sharper, thinner shadows.
+    On raw coordinates (0, the authors' (x, y, t)) f draws only smooth, blob-like masks, and the edges of blinds,
+    fingers and leaves were baked into the texture; more octaves let the masks follow a beard (docs/design.md
+    "Default preset")."""
     face_region_source: Literal["auto", "skin", "bisenet", "none"] = "auto"
     """Classifier h distilled into g: BiSeNet with the user's checkpoint when present ("auto"), else the
     project's skin-colour model ("skin"); "none" uses the render mask."""
@@ -88,9 +104,12 @@ class Weights:
 
     photometric: float = 2e3
     """w0: L_pho, the masked photometric loss."""
-    landmarks: float = 1e-3
-    """w1: L_lan in stage 2 (mean squared distance in ``landmark_units``)."""
-    landmark_units: Literal["pixels", "face"] = "pixels"
+    landmarks: float = 1e4
+    """w1: L_lan in stage 2 (mean squared distance in ``landmark_units``). With the paper's 1e-3 in squared
+    working pixels, L_pho pulled the expression blendshapes to their bounds and the photo's beard landed on the
+    nose's texels; this weight, in units of the face, was chosen on renders of known geometry (docs/textures.md
+    "The person's detail")."""
+    landmark_units: Literal["pixels", "face"] = "face"
     """Units of L_lan's distances in stage 2: working pixels (the authors' code: the balance with L_pho, a mean
     over pixels, then depends on the face's size in pixels), or the detected face's size (its landmarks' box
     diagonal), which keeps the balance whatever the working size and the face's share of the image."""
@@ -121,10 +140,11 @@ class Weights:
     (deface/losses/texture.py, SmoothDeparture); 0 = off, as in the paper."""
     smooth_departure_cells: int = 32
     """Cells per side over which smooth_departure compares the maps (256² maps: 8-texel blocks)."""
-    diffuse_level: float = 0.0
+    diffuse_level: float = MEAN_SKIN_GREEN
     """Stage 3: the diffuse map's level (median linear green of T^0 over the face) at which the diffuse map's
     regularisers, GP and LP have their weights; they are then measured relative to T^0's own level (each weight
-    times this level over T^0's, to the power of the map in its term). 0 = absolute, as the paper's code.
+    times this level over T^0's, to the power of the map in its term): the model's mean skin, on which stage 3
+    was tuned (docs/textures.md). 0 = absolute, as the paper's code.
     The photo pays the same for the same relative change of albedo whatever the skin's level (a darker albedo
     is lit by brighter lights), while an absolute L1 or L2 term costs a skin half as light a half or a quarter
     as much: dark skins' maps were regularised several times less than light ones' (deface/fit/stage3.py
@@ -141,22 +161,25 @@ class Iterations:
     """Statistical fit with light decoupling (iter_2)."""
     stage3: int = 200
     """Per-texel refinement (iter_3)."""
-    stage2_coarse_share: float = 0.0
+    stage2_coarse_share: float = 0.5
     """Share of stage 2's steps run first at half the working size (deface/fit/coarse.py: a quarter of the
     per-pixel work; pose, shape, albedo coefficients, lights and f, g are not tied to the pixel grid); the rest
-    refine at the working size. 0 = every step at the working size; a share, so `--iterations` keeps it."""
+    refine at the working size: half, as good on the shadow pairs at half the cost (benchmarks/history.md
+    "Speed"). 0 = every step at the working size; a share, so `--iterations` keeps it."""
     coarse_min_side: int = 128
     """No half-size steps when the half size would be under this many pixels on its longer side."""
     stage2_tolerance: float = 0.0
     """Stage 2 stops before `stage2` steps once converged (deface/fit/convergence.py): when its mean loss over
     the last `convergence_window` steps fell by less than this fraction of the mean over the window before
     (tested from ACE + 2 windows on). 0 = always run `stage2` steps."""
-    stage3_tolerance: float = 0.0
-    """The same early stop for stage 3 (tested from 2 windows on). 0 = always run `stage3` steps."""
-    stage3_holdout: float = 0.0
+    stage3_tolerance: float = 0.005
+    """The same early stop for stage 3 (tested from 2 windows on): the last steps of a fixed schedule hardly
+    lowered the loss (benchmarks/history.md "Speed"). 0 = always run `stage3` steps."""
+    stage3_holdout: float = 0.1
     """Share of the face's pixels stage 3 holds out of the photometric term: it keeps the maps, lights and f of
     the step that predicted them best and stops once `convergence_window` steps have not improved on it
-    (deface/fit/holdout.py: later steps fit colour noise, not the person). 0 = fit every pixel (the paper)."""
+    (deface/fit/holdout.py: later steps fit colour noise, not the person; docs/textures.md). 0 = fit every pixel
+    (the paper)."""
     convergence_window: int = 20
     """Steps per window of the early stops (window means smooth Adam's step-to-step noise)."""
 
@@ -181,9 +204,10 @@ class LearningRates:
     """Stage 2: rotation and translation."""
     stage3_diffuse: float = 0.005
     """Stage 3: the diffuse UV map (at the level ``stage3_diffuse_level`` when that is set)."""
-    stage3_diffuse_level: float = 0.0
+    stage3_diffuse_level: float = MEAN_SKIN_GREEN
     """The diffuse map's level (median linear green of T^0 over the face) at which ``stage3_diffuse`` is the
-    step; the step is then scaled by T^0's own level over this one. 0 = one step for every map (the paper's).
+    step; the step is then scaled by T^0's own level over this one: the model's mean skin, on which the step
+    was tuned. 0 = one step for every map (the paper's).
     Adam moves each parameter by about its step whatever the gradient's size, so a fixed step is a fixed
     change of albedo per texel: twice as large a share of a skin half as light, and dark skins' textures
     carried several times the texel noise of light ones (docs/textures.md). Scaled, every tone gets the same
@@ -202,10 +226,11 @@ class LearningRates:
 class PriorConfig:
     """The stage-3 texture priors GP, LP and HP."""
 
-    global_prior: bool = True
-    """GP: K-means palette of T^0's diffuse (4 x 4 = 16 colours)."""
-    local_prior: bool = True
-    """LP: 5 x 5 local variations against T^0."""
+    global_prior: bool = False
+    """GP: K-means palette of T^0's diffuse (4 x 4 = 16 colours). Off (on in ``paper``): GP and LP held a
+    beard and moles at the statistical skin (docs/textures.md "The person's detail")."""
+    local_prior: bool = False
+    """LP: 5 x 5 local variations against T^0 (off, as GP)."""
     human_prior: bool = True
     """HP: FaceNet (VGGFace2) identity confidence; runs only when the user has the weights."""
     palette_size: int = 16
@@ -223,23 +248,26 @@ class PriorConfig:
 class ToneConfig:
     """Keeping the person's skin tone (docs/skin-tone.md): a free tone axis and lights held to the scene."""
 
-    free_tone: bool = False
+    free_tone: bool = True
     """Stage 2 optimises the skin tone (ITA) along the albedo model's tone axis, flat prior over the human
-    range (deface/models/skin_tone.py); off: the model's mean skin, as the paper's AlbedoMM fit."""
-    scene_light_prior: bool = False
+    range (deface/models/skin_tone.py): the person's own tone, where the model's mean skin with free lights
+    gave everybody nearly the same pale texture (docs/skin-tone.md). Off: the model's mean skin, as the paper's
+    AlbedoMM fit (``paper``, ``deface-mean-skin``)."""
+    scene_light_prior: bool = True
     """Hold the lights' colour and the brightest light's white level to the scene's illuminant estimate
-    (deface/priors/illuminant.py, deface/losses/illuminant.py) in stages 2 and 3."""
+    (deface/priors/illuminant.py, deface/losses/illuminant.py) in stages 2 and 3: with a free tone, what keeps
+    the tone from trading against the lights' level (docs/skin-tone.md)."""
     weight: float = 1.0
     """Weight of the scene-light terms (each a squared log-ratio over its sigma^2)."""
     colour_sigma: float = 0.05
     """Allowed log-ratio spread of a light's chromaticity around the estimate's."""
     exposure_sigma: float = 0.1
     """Allowed log-ratio spread of the brightest light's white level around the estimate's."""
-    learning_rate: float = 0.3
+    learning_rate: float = 0.0
     """Adam step of the tone in stage 2 (degrees of ITA); 0: the tone stays where it starts, the skin in the key
-    light under the scene's white level (deface/fit/scene_light.py). ``deface`` uses 0: the tone trades freely
-    against the key light's level, and on the renders of known albedo stage 2 moved good starts by up to 23
-    degrees (a brim's shadow taken for darker skin, a warm light's clipped red for lighter; BENCHMARKS.md)."""
+    light under the scene's white level (deface/fit/scene_light.py). 0, as the tone trades freely against the
+    key light's level: on the renders of known albedo stage 2 moved good starts far (a brim's shadow taken for
+    darker skin, a warm light's clipped red for lighter; BENCHMARKS.md "Skin tone")."""
     neutral_albedo: bool = True
     """With a free tone, the albedo coefficients are projected after each stage-2 step so that they leave the
     skin's ITA over the cheeks and forehead where the tone axis puts it (deface/models/tone_neutral.py): the tone
@@ -342,10 +370,11 @@ class CropConfig:
 
 @dataclass(frozen=True)
 class FitConfig:
-    """Everything one fit uses. Build from a preset: ``presets.get("default")``."""
+    """Everything one fit uses; its defaults are the default preset's values, ``preset`` aside. Build from a
+    preset: ``presets.get("default")``."""
 
     preset: str = "custom"
-    """Name of the preset this config came from (recorded in params.json)."""
+    """Name of the preset this config came from (recorded in params.json; "custom": none)."""
     model: str = "ict"
     """Face model: "ict" (embedded default) or "bfm" (BFM 2017 + AlbedoMM, user-supplied)."""
     resolution: int = 512
@@ -454,14 +483,26 @@ def set_from_text(config: Any, assignment: str) -> Any:
 
 def from_dict(data: dict, cls: type = None) -> Any:
     """The config (``cls``, default FitConfig) a ``to_dict`` dict describes, e.g. params.json's "config":
-    every value is checked against its field's type (lists become tuples). Fields the dict leaves out keep
-    their defaults; an unknown field is an error."""
+    every value is checked against its field's type (lists become tuples); an unknown field is an error.
+
+    Settings the dict leaves out (a params.json written before they existed) take the values fits ran with
+    then: for a FitConfig the paper's where the shipped method departs from them (``presets.PAPER``, the
+    defaults until issue 41 made the shipped method the defaults), so that an old run replays as it ran;
+    for another class its defaults."""
     cls = cls or FitConfig
     if not isinstance(data, dict):
         raise ValueError(f"a config must be a JSON object, got {type(data).__name__}")
     moved = {old: data[old] for old in RENAMED if cls is FitConfig and old in data}
-    config = build(cls(), {key: value for key, value in data.items() if key not in moved})
+    base = _former_defaults() if cls is FitConfig else cls()
+    config = build(base, {key: value for key, value in data.items() if key not in moved})
     return override(config, **moved)
+
+
+def _former_defaults() -> FitConfig:
+    """FitConfig's defaults before issue 41: the paper's values, no preset ("custom")."""
+    from deface.fit.presets import PAPER  # the presets build on this module
+
+    return override(FitConfig(), **PAPER)
 
 
 def supports_free_tone(config: FitConfig) -> FitConfig:
