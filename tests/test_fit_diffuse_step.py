@@ -29,7 +29,7 @@ def _skin(seed: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
 
 def test_step_is_fixed_without_a_level_and_scales_with_the_face_texels_median_green():
     diffuse, mask = _skin()
-    fixed = LearningRates()
+    fixed = LearningRates(stage3_diffuse_level=0.0)
     assert diffuse_step(fixed, diffuse, mask) == fixed.stage3_diffuse
     rates = LearningRates(stage3_diffuse_level=0.33)
     green = float(diffuse[:, :24, 1].median())
@@ -62,7 +62,7 @@ def test_a_darker_skin_gets_the_same_relative_refinement():
     light_map = _refined(initial, photo, diffuse_step(rates, initial, mask), steps=10)
     dark_map = _refined(dark * initial, dark * photo, diffuse_step(rates, dark * initial, mask), steps=10)
     torch.testing.assert_close(dark_map, dark * light_map, rtol=1e-4, atol=1e-6)
-    fixed = LearningRates()
+    fixed = LearningRates(stage3_diffuse_level=0.0)
     light_fixed = _refined(initial, photo, diffuse_step(fixed, initial, mask), steps=10)
     dark_fixed = _refined(dark * initial, dark * photo, diffuse_step(fixed, dark * initial, mask), steps=10)
     assert float(((dark_fixed - dark * light_fixed).abs() / (dark * light_fixed)).max()) > 0.02
@@ -70,7 +70,7 @@ def test_a_darker_skin_gets_the_same_relative_refinement():
 
 def test_relative_scale_is_one_without_a_level_and_the_level_over_the_maps_otherwise():
     diffuse, mask = _skin()
-    assert relative_scale(Weights(), diffuse, mask) == 1.0
+    assert relative_scale(Weights(diffuse_level=0.0), diffuse, mask) == 1.0
     assert relative_scale(Weights(diffuse_level=0.33), diffuse, mask) == pytest.approx(0.33 / map_level(diffuse, mask))
     assert relative_scale(Weights(diffuse_level=0.33), 0.25 * diffuse, mask) == pytest.approx(
         4 * relative_scale(Weights(diffuse_level=0.33), diffuse, mask))
@@ -122,7 +122,7 @@ def test_a_darker_skin_under_brighter_light_is_held_to_its_map_as_much():
     map and its refinement is not the light one's (10 % apart here)."""
     initial, mask = _skin(0)
     photo, _ = _skin(1)
-    dark, relative, absolute = 0.2, Weights(diffuse_level=0.33), Weights()
+    dark, relative, absolute = 0.2, Weights(diffuse_level=0.33), Weights(diffuse_level=0.0)
     light_map = _regularised(initial, mask, photo, 1.0, relative)
     dark_map = _regularised(dark * initial, mask, photo, 1.0 / dark, relative)
     torch.testing.assert_close(dark_map, dark * light_map, rtol=1e-4, atol=1e-6)

@@ -293,8 +293,9 @@ def load_config_file(path: Path) -> FitConfig:
 
 def settings_help() -> str:
     """Every setting as ``path = default: docstring`` (for ``--help``; rich markup escaped)."""
-    lines = ["Settings (--set PATH=VALUE; defaults of FitConfig, the presets change some: `deface presets`):"]
-    lines += [f"  {path} = {show_value(default)}: {doc}" for path, default, doc in documentation()]
+    lines = ["Settings (--set PATH=VALUE; the defaults are the default preset's, the other presets change some: "
+             "`deface presets`):"]
+    lines += [f"  {path} = {show_value(default)}: {doc}" for path, default, doc in documentation(FitConfig)]
     return escape("\n".join(lines))
 
 

@@ -1,5 +1,6 @@
 """`deface presets`: every preset with its one-line description and the settings where it differs from the
-default preset (the default itself: from the paper's)."""
+default preset, whose values are FitConfig's defaults (deface/fit/presets.py lists each preset as those
+differences)."""
 
 from __future__ import annotations
 
@@ -28,14 +29,15 @@ def presets_command(
         console.print(f"[red]error:[/red] unknown preset '{escape(name)}' (choose from: {', '.join(presets.names())})")
         raise typer.Exit(2)
     for key in chosen:
-        config = presets.get(key)
         is_default = key == presets.DEFAULT_PRESET
-        base, base_name = (presets.get("paper"), "paper") if is_default else (default, "the default")
         title = f"{key} (the default)" if is_default else key
         console.print(f"[bold]{escape(title)}[/bold]: {escape(presets.DESCRIPTIONS[key])}")
-        changed = {path: values for path, values in differences(config, base).items() if path != "preset"}
+        if is_default:
+            console.print("    the defaults of every setting (`deface fit --help` lists them)", highlight=False)
+            continue
+        changed = {path: values for path, values in differences(presets.get(key), default).items() if path != "preset"}
         if not changed:
-            console.print(f"    same settings as {base_name}")
+            console.print("    same settings as the default")
         for path, (mine, theirs) in changed.items():
-            line = f"    {path} = {show_value(mine)}  ({base_name}: {show_value(theirs)})"
+            line = f"    {path} = {show_value(mine)}  (the default: {show_value(theirs)})"
             console.print(escape(line), highlight=False)

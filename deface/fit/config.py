@@ -1,18 +1,29 @@
 """Fitting configuration: one dataclass per component, every field documented.
 
-Named presets live in :mod:`deface.fit.presets`; the resolved config is written to ``params.json``.
-Weights are named after the paper's Alg. 1 (w0..w7) and Table 6.
+The defaults are the shipped method (the default preset, ``deface``), each field's docstring saying why its value
+was chosen; the other named presets (:mod:`deface.fit.presets`) are differences from them. The resolved config is
+written to ``params.json``; reading and parsing values is :mod:`deface.fit.config_values`. Weights are named after
+the paper's Alg. 1 (w0..w7) and Table 6.
 """
 
 from __future__ import annotations
 
-import ast
-import inspect
-import textwrap
-from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
-from types import UnionType
-from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
+from dataclasses import dataclass, field
+from typing import Any, Literal
 
+from deface.fit.config_values import (
+    build,
+    check_value,
+    differences,
+    documentation,
+    field_type,
+    flatten,
+    parse_value,
+    replace_path,
+    split_assignment,
+    to_dict,
+)
+from deface.models.albedo_prior import AlbedoPriorConfig
 from deface.models.registry import TONE_AXIS
 from deface.priors.face_region import SkinClassifierConfig
 from deface.priors.illuminant import IlluminantConfig
@@ -21,13 +32,26 @@ from deface.render.renderer import RenderConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 
+__all__ = [  # the value handling lives in config_values; callers import it from here with the schema
+    "RENAMED", "CropConfig", "DecoupleConfig", "FitConfig", "Iterations", "LearningRates", "LightConfig",
+    "PriorConfig", "RenderSettings", "Stage1Config", "ToneConfig", "Weights", "check_value", "differences",
+    "documentation", "field_type", "flatten", "from_dict", "override", "parse_value", "set_from_text",
+    "supports_free_tone", "to_dict",
+]
+
+MEAN_SKIN_GREEN = AlbedoPriorConfig().skin_rgb[1]
+"""Linear green of the albedo model's mean skin (Jensen et al. 2001's mean Rd, deface/models/albedo_prior.py): the
+diffuse level stage 3's step and regularisers were tuned at, the level ``learning_rates.stage3_diffuse_level`` and
+``weights.diffuse_level`` refer to."""
+
 
 @dataclass(frozen=True)
 class LightConfig:
     """The light conditions: how many, how many SH bands, how they start."""
 
-    num_lights: int = 5
-    """n: light conditions at the start (ACE may drop some). 1 = a single global light (NextFace)."""
+    num_lights: int = 3
+    """n: light conditions at the start (ACE may drop some): a lit, a shadowed and a spare one (docs/design.md
+    "Default preset"; the paper's 5 in ``paper``). 1 = a single global light (NextFace)."""
     bands: int = 9
     """B: SH bands per light (B*B coefficients per colour)."""
     init: Literal["paper", "code"] = "paper"
@@ -43,26 +67,33 @@ class DecoupleConfig:
 
     light_masks: bool = True
     """Use the light-mask field f (off: every kept light covers the whole face, i.e. one light when n = 1)."""
-    face_region: bool = True
-    """Use the face-region field g (off: M_o is the classifier h itself if `restrict_to_face`, else M_R)."""
+    face_region: bool = False
+    """Use the face-region field g (off: M_o is the classifier h itself if `restrict_to_face`, else M_R). Off: g,
+    trained to match h, also lowers L_pho by shrinking wherever the render fits badly, which left parts of the
+    face unfitted (docs/design.md "Default preset"; the paper's g in ``paper``)."""
     restrict_to_face: bool = True
     """Without g, restrict the photometric loss to the face-region classifier h (NextFace*); else to M_R."""
-    epsilon: float = 0.17
-    """ACE threshold on a light mask's area fraction."""
+    epsilon: float = 0.09
+    """ACE threshold on a light mask's area fraction: the authors' portrait-shadow value. With the paper's 0.17 a
+    shadow covering less of the face than that lost its light at ACE and was baked into the texture
+    (docs/design.md "Default preset")."""
     ace_iteration: int = 100
     """iter_0: the stage-2 iteration at which ACE selects the kept lights."""
     area_normaliser: Literal["render_mask", "image"] = "render_mask"
     """ACE area over the render mask (authors' code) or over all pixels (paper's formula)."""
     loss_form: Literal["code", "paper"] = "code"
     """Formulas of L_area / L_bin / L_seg / L_pho as in the authors' code or as printed in the paper."""
-    clipped_as_bound: bool = False
+    clipped_as_bound: bool = True
     """L_pho takes a clipped channel of the photo (sRGB >= 0.98) as a lower bound, not a value: a render above
-    it costs nothing (deface/losses/photometric.py). Off: the paper's loss."""
+    it costs nothing (deface/losses/photometric.py); a clipped channel says only that the skin is at least that
+    bright, part of keeping the person's skin tone (docs/skin-tone.md). Off: the paper's loss."""
     hidden: tuple[int, ...] = (16, 64, 64)
     """Hidden widths of f (the authors' 3->16->64->64->n)."""
-    fourier_frequencies: int = 0
-    """Octaves of sin/cos(2^k pi p) features on f's input (0 = the authors' raw (x, y, t)); more let the
-    masks follow sharper, thinner shadows."""
+    fourier_frequencies: int = 4
+    """Octaves of sin/cos(2^k pi p) features on f's input; more let the masks follow sharper, thinner shadows.
+    On raw coordinates (0, the authors' (x, y, t)) f draws only smooth, blob-like masks, and the edges of blinds,
+    fingers and leaves were baked into the texture; more octaves let the masks follow a beard (docs/design.md
+    "Default preset")."""
     face_region_source: Literal["auto", "skin", "bisenet", "none"] = "auto"
     """Classifier h distilled into g: BiSeNet with the user's checkpoint when present ("auto"), else the
     project's skin-colour model ("skin"); "none" uses the render mask."""
@@ -74,9 +105,12 @@ class Weights:
 
     photometric: float = 2e3
     """w0: L_pho, the masked photometric loss."""
-    landmarks: float = 1e-3
-    """w1: L_lan in stage 2 (mean squared distance in ``landmark_units``)."""
-    landmark_units: Literal["pixels", "face"] = "pixels"
+    landmarks: float = 1e4
+    """w1: L_lan in stage 2 (mean squared distance in ``landmark_units``). With the paper's 1e-3 in squared
+    working pixels, L_pho pulled the expression blendshapes to their bounds and the photo's beard landed on the
+    nose's texels; this weight, in units of the face, was chosen on renders of known geometry (docs/textures.md
+    "The person's detail")."""
+    landmark_units: Literal["pixels", "face"] = "face"
     """Units of L_lan's distances in stage 2: working pixels (the authors' code: the balance with L_pho, a mean
     over pixels, then depends on the face's size in pixels), or the detected face's size (its landmarks' box
     diagonal), which keeps the balance whatever the working size and the face's share of the image."""
@@ -107,10 +141,11 @@ class Weights:
     (deface/losses/texture.py, SmoothDeparture); 0 = off, as in the paper."""
     smooth_departure_cells: int = 32
     """Cells per side over which smooth_departure compares the maps (256² maps: 8-texel blocks)."""
-    diffuse_level: float = 0.0
+    diffuse_level: float = MEAN_SKIN_GREEN
     """Stage 3: the diffuse map's level (median linear green of T^0 over the face) at which the diffuse map's
     regularisers, GP and LP have their weights; they are then measured relative to T^0's own level (each weight
-    times this level over T^0's, to the power of the map in its term). 0 = absolute, as the paper's code.
+    times this level over T^0's, to the power of the map in its term): the model's mean skin, on which stage 3
+    was tuned (docs/textures.md). 0 = absolute, as the paper's code.
     The photo pays the same for the same relative change of albedo whatever the skin's level (a darker albedo
     is lit by brighter lights), while an absolute L1 or L2 term costs a skin half as light a half or a quarter
     as much: dark skins' maps were regularised several times less than light ones' (deface/fit/stage3.py
@@ -127,22 +162,25 @@ class Iterations:
     """Statistical fit with light decoupling (iter_2)."""
     stage3: int = 200
     """Per-texel refinement (iter_3)."""
-    stage2_coarse_share: float = 0.0
+    stage2_coarse_share: float = 0.5
     """Share of stage 2's steps run first at half the working size (deface/fit/coarse.py: a quarter of the
     per-pixel work; pose, shape, albedo coefficients, lights and f, g are not tied to the pixel grid); the rest
-    refine at the working size. 0 = every step at the working size; a share, so `--iterations` keeps it."""
+    refine at the working size: half, as good on the shadow pairs at half the cost (benchmarks/history.md
+    "Speed"). 0 = every step at the working size; a share, so `--iterations` keeps it."""
     coarse_min_side: int = 128
     """No half-size steps when the half size would be under this many pixels on its longer side."""
     stage2_tolerance: float = 0.0
     """Stage 2 stops before `stage2` steps once converged (deface/fit/convergence.py): when its mean loss over
     the last `convergence_window` steps fell by less than this fraction of the mean over the window before
     (tested from ACE + 2 windows on). 0 = always run `stage2` steps."""
-    stage3_tolerance: float = 0.0
-    """The same early stop for stage 3 (tested from 2 windows on). 0 = always run `stage3` steps."""
-    stage3_holdout: float = 0.0
+    stage3_tolerance: float = 0.005
+    """The same early stop for stage 3 (tested from 2 windows on): the last steps of a fixed schedule hardly
+    lowered the loss (benchmarks/history.md "Speed"). 0 = always run `stage3` steps."""
+    stage3_holdout: float = 0.1
     """Share of the face's pixels stage 3 holds out of the photometric term: it keeps the maps, lights and f of
     the step that predicted them best and stops once `convergence_window` steps have not improved on it
-    (deface/fit/holdout.py: later steps fit colour noise, not the person). 0 = fit every pixel (the paper)."""
+    (deface/fit/holdout.py: later steps fit colour noise, not the person; docs/textures.md). 0 = fit every pixel
+    (the paper)."""
     convergence_window: int = 20
     """Steps per window of the early stops (window means smooth Adam's step-to-step noise)."""
 
@@ -167,9 +205,10 @@ class LearningRates:
     """Stage 2: rotation and translation."""
     stage3_diffuse: float = 0.005
     """Stage 3: the diffuse UV map (at the level ``stage3_diffuse_level`` when that is set)."""
-    stage3_diffuse_level: float = 0.0
+    stage3_diffuse_level: float = MEAN_SKIN_GREEN
     """The diffuse map's level (median linear green of T^0 over the face) at which ``stage3_diffuse`` is the
-    step; the step is then scaled by T^0's own level over this one. 0 = one step for every map (the paper's).
+    step; the step is then scaled by T^0's own level over this one: the model's mean skin, on which the step
+    was tuned. 0 = one step for every map (the paper's).
     Adam moves each parameter by about its step whatever the gradient's size, so a fixed step is a fixed
     change of albedo per texel: twice as large a share of a skin half as light, and dark skins' textures
     carried several times the texel noise of light ones (docs/textures.md). Scaled, every tone gets the same
@@ -188,10 +227,11 @@ class LearningRates:
 class PriorConfig:
     """The stage-3 texture priors GP, LP and HP."""
 
-    global_prior: bool = True
-    """GP: K-means palette of T^0's diffuse (4 x 4 = 16 colours)."""
-    local_prior: bool = True
-    """LP: 5 x 5 local variations against T^0."""
+    global_prior: bool = False
+    """GP: K-means palette of T^0's diffuse (4 x 4 = 16 colours). Off (on in ``paper``): GP and LP held a
+    beard and moles at the statistical skin (docs/textures.md "The person's detail")."""
+    local_prior: bool = False
+    """LP: 5 x 5 local variations against T^0 (off, as GP)."""
     human_prior: bool = True
     """HP: FaceNet (VGGFace2) identity confidence; runs only when the user has the weights."""
     palette_size: int = 16
@@ -209,23 +249,26 @@ class PriorConfig:
 class ToneConfig:
     """Keeping the person's skin tone (docs/skin-tone.md): a free tone axis and lights held to the scene."""
 
-    free_tone: bool = False
+    free_tone: bool = True
     """Stage 2 optimises the skin tone (ITA) along the albedo model's tone axis, flat prior over the human
-    range (deface/models/skin_tone.py); off: the model's mean skin, as the paper's AlbedoMM fit."""
-    scene_light_prior: bool = False
+    range (deface/models/skin_tone.py): the person's own tone, where the model's mean skin with free lights
+    gave everybody nearly the same pale texture (docs/skin-tone.md). Off: the model's mean skin, as the paper's
+    AlbedoMM fit (``paper``, ``deface-mean-skin``)."""
+    scene_light_prior: bool = True
     """Hold the lights' colour and the brightest light's white level to the scene's illuminant estimate
-    (deface/priors/illuminant.py, deface/losses/illuminant.py) in stages 2 and 3."""
+    (deface/priors/illuminant.py, deface/losses/illuminant.py) in stages 2 and 3: with a free tone, what keeps
+    the tone from trading against the lights' level (docs/skin-tone.md)."""
     weight: float = 1.0
     """Weight of the scene-light terms (each a squared log-ratio over its sigma^2)."""
     colour_sigma: float = 0.05
     """Allowed log-ratio spread of a light's chromaticity around the estimate's."""
     exposure_sigma: float = 0.1
     """Allowed log-ratio spread of the brightest light's white level around the estimate's."""
-    learning_rate: float = 0.3
+    learning_rate: float = 0.0
     """Adam step of the tone in stage 2 (degrees of ITA); 0: the tone stays where it starts, the skin in the key
-    light under the scene's white level (deface/fit/scene_light.py). ``deface`` uses 0: the tone trades freely
-    against the key light's level, and on the renders of known albedo stage 2 moved good starts by up to 23
-    degrees (a brim's shadow taken for darker skin, a warm light's clipped red for lighter; BENCHMARKS.md)."""
+    light under the scene's white level (deface/fit/scene_light.py). 0, as the tone trades freely against the
+    key light's level: on the renders of known albedo stage 2 moved good starts far (a brim's shadow taken for
+    darker skin, a warm light's clipped red for lighter; BENCHMARKS.md "Skin tone")."""
     neutral_albedo: bool = True
     """With a free tone, the albedo coefficients are projected after each stage-2 step so that they leave the
     skin's ITA over the cheeks and forehead where the tone axis puts it (deface/models/tone_neutral.py): the tone
@@ -296,10 +339,11 @@ class CropConfig:
 
 @dataclass(frozen=True)
 class FitConfig:
-    """Everything one fit uses. Build from a preset: ``presets.get("default")``."""
+    """Everything one fit uses; its defaults are the default preset's values, ``preset`` aside. Build from a
+    preset: ``presets.get("default")``."""
 
     preset: str = "custom"
-    """Name of the preset this config came from (recorded in params.json)."""
+    """Name of the preset this config came from (recorded in params.json; "custom": none)."""
     model: str = "ict"
     """Face model: "ict" (embedded default) or "bfm" (BFM 2017 + AlbedoMM, user-supplied)."""
     resolution: int = 512
@@ -390,204 +434,44 @@ RENAMED = {
 paths (scripts, and the params.json of runs made before the move)."""
 
 
-def to_dict(config: Any) -> dict:
-    """A JSON-ready dict of a (nested) config."""
-    return asdict(config)
-
-
-def from_dict(data: dict, cls: type = None) -> Any:
-    """The config (``cls``, default FitConfig) a ``to_dict`` dict describes, e.g. params.json's "config":
-    every value is checked against its field's type (lists become tuples). Fields the dict leaves out keep
-    their defaults; an unknown field is an error."""
-    cls = cls or FitConfig
-    if not isinstance(data, dict):
-        raise ValueError(f"a config must be a JSON object, got {type(data).__name__}")
-    moved = {old: data[old] for old in RENAMED if cls is FitConfig and old in data}
-    config = _build(cls, {key: value for key, value in data.items() if key not in moved}, "")
-    return override(config, **moved)
-
-
-def _build(cls: type, data: dict, prefix: str) -> Any:
-    hints = _hints(cls)
-    values = {}
-    for key, value in data.items():
-        if key not in hints:
-            raise ValueError(f"unknown config field '{prefix}{key}' (known: {', '.join(sorted(hints))})")
-        hint = hints[key]
-        if is_dataclass(hint):
-            if not isinstance(value, dict):
-                raise ValueError(f"config field '{prefix}{key}' is a group of settings, got {value!r}")
-            values[key] = _build(hint, value, f"{prefix}{key}.")
-        else:
-            values[key] = check_value(value, hint, f"{prefix}{key}")
-    return cls(**values)
-
-
-def _hints(cls: type) -> dict[str, Any]:
-    """Field name -> resolved type of a config dataclass."""
-    hints = get_type_hints(cls)
-    return {f.name: hints[f.name] for f in fields(cls)}
-
-
-def check_value(value: Any, hint: Any, path: str) -> Any:
-    """``value`` as a value of type ``hint`` (JSON lists -> tuples, ints -> floats), or a one-line ValueError."""
-    origin, args = get_origin(hint), get_args(hint)
-    if origin in (Union, UnionType):
-        if value is None and type(None) in args:
-            return None
-        (inner,) = [a for a in args if a is not type(None)]
-        return check_value(value, inner, path)
-    if origin is Literal:
-        if value not in args:
-            raise ValueError(f"{path} must be one of {', '.join(map(str, args))}, got {value!r}")
-        return value
-    if origin is tuple:
-        if not isinstance(value, list | tuple):
-            raise ValueError(f"{path} must be a list of values, got {value!r}")
-        items = args[:1] * len(value) if len(args) == 2 and args[1] is Ellipsis else args
-        if len(items) != len(value):
-            raise ValueError(f"{path} must have {len(items)} values, got {len(value)}")
-        return tuple(check_value(v, h, f"{path}[{i}]") for i, (v, h) in enumerate(zip(value, items, strict=True)))
-    if hint is bool:
-        if not isinstance(value, bool):
-            raise ValueError(f"{path} must be true or false, got {value!r}")
-        return value
-    if hint is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"{path} must be an integer, got {value!r}")
-        return value
-    if hint is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(f"{path} must be a number, got {value!r}")
-        return float(value)
-    if hint is str:
-        if not isinstance(value, str):
-            raise ValueError(f"{path} must be a string, got {value!r}")
-        return value
-    raise ValueError(f"{path}: cannot set a value of type {hint}")  # pragma: no cover - no such field today
-
-
-def parse_value(text: str, hint: Any, path: str) -> Any:
-    """A command-line string (``--set path=text``) as a value of type ``hint``: true/false (also yes/no,
-    on/off, 1/0), numbers, none (where allowed), comma lists for tuples; one-line ValueError otherwise."""
-    origin, args = get_origin(hint), get_args(hint)
-    word = text.strip()
-    if origin in (Union, UnionType):
-        if word.lower() in ("none", "null") and type(None) in args:
-            return None
-        (inner,) = [a for a in args if a is not type(None)]
-        return parse_value(text, inner, path)
-    if origin is tuple:
-        parts = [part for part in word.split(",") if part.strip()]
-        items = args[:1] * len(parts) if len(args) == 2 and args[1] is Ellipsis else args
-        if not parts or len(items) != len(parts):
-            count = "one or more" if len(args) == 2 and args[1] is Ellipsis else str(len(items))
-            raise ValueError(f"{path} takes {count} comma-separated values, got '{text}'")
-        return tuple(parse_value(part, h, f"{path}[{i}]") for i, (part, h) in enumerate(zip(parts, items, strict=True)))
-    if hint is bool:
-        truth = {word: True for word in ("true", "yes", "on", "1")} | {w: False for w in ("false", "no", "off", "0")}
-        if word.lower() not in truth:
-            raise ValueError(f"{path} must be true or false, got '{text}'")
-        return truth[word.lower()]
-    if hint in (int, float):
-        try:
-            return hint(word)
-        except ValueError:
-            raise ValueError(f"{path} must be {'an integer' if hint is int else 'a number'}, got '{text}'") from None
-    return check_value(word, hint, path)
-
-
-def field_type(cls: type, path: str) -> Any:
-    """The type of the setting at dotted ``path`` of config class ``cls`` (ValueError for an unknown path)."""
-    parts = path.split(".")
-    for depth, part in enumerate(parts):
-        hints = _hints(cls)
-        if part not in hints:
-            where = ".".join(parts[:depth]) or "the config"
-            raise ValueError(f"unknown setting '{path}': {where} has no field '{part}' "
-                             f"(known: {', '.join(sorted(hints))})")
-        cls = hints[part]
-        if depth < len(parts) - 1 and not is_dataclass(cls):
-            raise ValueError(f"unknown setting '{path}': '{'.'.join(parts[: depth + 1])}' is a single value")
-    if is_dataclass(cls):
-        raise ValueError(f"'{path}' is a group of settings: set one of its fields ({', '.join(_hints(cls))})")
-    return cls
+def override(config: Any, **changes: Any) -> Any:
+    """A copy with dotted-path changes: ``override(cfg, **{"lights.num_lights": 3})`` (old paths of RENAMED
+    are accepted)."""
+    for path, value in changes.items():
+        config = replace_path(config, RENAMED.get(path, path), value)
+    return config
 
 
 def set_from_text(config: Any, assignment: str) -> Any:
     """``config`` with one ``dotted.path=value`` (as ``--set`` takes it) applied, value parsed by the field's
     type; old paths of RENAMED are accepted."""
-    path, equals, text = assignment.partition("=")
-    path = RENAMED.get(path.strip(), path.strip())
-    if not equals or not path:
-        raise ValueError(f"--set takes PATH=VALUE (e.g. decouple.epsilon=0.12), got '{assignment}'")
-    value = parse_value(text, field_type(type(config), path), path)
-    return override(config, **{path: value})
+    path, text = split_assignment(assignment)
+    path = RENAMED.get(path, path)
+    return override(config, **{path: parse_value(text, field_type(type(config), path), path)})
 
 
-def flatten(config: Any, prefix: str = "") -> dict[str, Any]:
-    """Every setting of a (nested) config by dotted path, in declaration order."""
-    out = {}
-    for f in fields(config):
-        value = getattr(config, f.name)
-        if is_dataclass(value):
-            out.update(flatten(value, f"{prefix}{f.name}."))
-        else:
-            out[f"{prefix}{f.name}"] = value
-    return out
+def from_dict(data: dict, cls: type = None) -> Any:
+    """The config (``cls``, default FitConfig) a ``to_dict`` dict describes, e.g. params.json's "config":
+    every value is checked against its field's type (lists become tuples); an unknown field is an error.
 
-
-def differences(config: Any, base: Any) -> dict[str, tuple[Any, Any]]:
-    """path -> (value in ``config``, value in ``base``) for every setting where the two differ."""
-    mine, theirs = flatten(config), flatten(base)
-    return {path: (value, theirs[path]) for path, value in mine.items() if value != theirs[path]}
-
-
-def documentation(cls: type = None, prefix: str = "") -> list[tuple[str, Any, str]]:
-    """(dotted path, default, docstring) of every setting of a config class (default FitConfig), from the
-    attribute docstrings in the source: what ``deface fit --help`` lists."""
+    Settings the dict leaves out (a params.json written before they existed) take the values fits ran with
+    then: for a FitConfig the paper's where the shipped method departs from them (``presets.PAPER``, the
+    defaults until issue 41 made the shipped method the defaults), so that an old run replays as it ran;
+    for another class its defaults."""
     cls = cls or FitConfig
-    docs = _attribute_docs(cls)
-    defaults = cls()
-    out = []
-    for name, hint in _hints(cls).items():
-        if is_dataclass(hint):
-            out += documentation(hint, f"{prefix}{name}.")
-        else:
-            out.append((f"{prefix}{name}", getattr(defaults, name), docs.get(name, "")))
-    return out
+    if not isinstance(data, dict):
+        raise ValueError(f"a config must be a JSON object, got {type(data).__name__}")
+    moved = {old: data[old] for old in RENAMED if cls is FitConfig and old in data}
+    base = _former_defaults() if cls is FitConfig else cls()
+    config = build(base, {key: value for key, value in data.items() if key not in moved})
+    return override(config, **moved)
 
 
-def _attribute_docs(cls: type) -> dict[str, str]:
-    """Field name -> its docstring (the string literal right after the field in the class body), one line."""
-    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
-    body = tree.body[0].body
-    docs = {}
-    for node, after in zip(body, body[1:], strict=False):
-        if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
-                and isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant)
-                and isinstance(after.value.value, str)):
-            docs[node.target.id] = " ".join(after.value.value.split())
-    return docs
+def _former_defaults() -> FitConfig:
+    """FitConfig's defaults before issue 41: the paper's values, no preset ("custom")."""
+    from deface.fit.presets import PAPER  # the presets build on this module
 
-
-def override(config: Any, **changes: Any) -> Any:
-    """A copy with dotted-path changes: ``override(cfg, **{"lights.num_lights": 3})`` (old paths of RENAMED
-    are accepted)."""
-    for path, value in changes.items():
-        config = _set_path(config, RENAMED.get(path, path).split("."), value)
-    return config
-
-
-def _set_path(config: Any, parts: list[str], value: Any) -> Any:
-    if not is_dataclass(config):
-        raise ValueError(f"cannot set '{'.'.join(parts)}' on a non-config value")
-    names = {f.name for f in fields(config)}
-    if parts[0] not in names:
-        raise ValueError(f"unknown config field '{parts[0]}' (known: {', '.join(sorted(names))})")
-    if len(parts) == 1:
-        return replace(config, **{parts[0]: value})
-    return replace(config, **{parts[0]: _set_path(getattr(config, parts[0]), parts[1:], value)})
+    return override(FitConfig(), **PAPER)
 
 
 def supports_free_tone(config: FitConfig) -> FitConfig:

@@ -1,23 +1,25 @@
-"""Named presets: each a documented FitConfig. The CLI's ``--preset`` picks one; switches override it.
+"""Named presets, each written as its differences from FitConfig's defaults (``PRESETS``: dotted paths, as
+``config.override`` takes them). The defaults are the shipped method, ``deface``; each field's docstring says
+why its value was chosen. The CLI's ``--preset`` picks one; switches override it; ``deface presets`` prints each
+preset's differences from the default.
 
+- ``deface``: the defaults. The paper's method with the changes the benchmarks chose (docs/design.md "Default
+  preset", docs/textures.md, docs/skin-tone.md, BENCHMARKS.md): M_o = M_R h instead of the distilled field g;
+  ACE's eps 0.09 and n = 3 initial lights; Fourier features on f's input; stage-3 maps as pyramids gated by the
+  photos' pixels per texel, completed where unseen, stopped by held-out pixels; the person's skin tone (free
+  tone axis, lights held to the scene's illuminant); and what keeps the person's dark albedo in the albedo
+  (docs/textures.md "The person's detail"): L_lan in units of the face, stage 2 weighing pixels by their
+  shading evidence, an offline h that keeps pigment and the beard zone, and no GP, LP or smooth-departure term.
 - ``paper``: Table 6 of the paper (w0..w7 = 2e3, 1e-3, 1.5e2, 0.5, 25, 2e3, 2.0, 1.0; iter_0 = 100,
-  stage-2/3 iterations 400/200; eps = 0.17; n = 5; gamma_i = 2(i/n) - 1).
+  stage-2/3 iterations 400/200; eps = 0.17; n = 5; gamma_i = 2(i/n) - 1): ``PAPER``.
 - ``code-images`` / ``code-video`` / ``code-portrait``: the authors' code configs (VoxCeleb2 images,
-  VoxCeleb2 videos, portrait-shadow set): L = 1.5 / 1.5 / 1.0 with gamma_i = -L + 2L(i+1)/n, their eps,
-  w1, w2, w4, SH learning rate and stage-2 length (``../shared/docs/method-facts.md``).
+  VoxCeleb2 videos, portrait-shadow set): the paper's, with L = 1.5 / 1.5 / 1.0 with gamma_i = -L + 2L(i+1)/n,
+  their eps, w1, w2, w4, SH learning rate and stage-2 length (``../shared/docs/method-facts.md``).
 - ``nextface``: the single-illumination baseline: one light, no f, no g, no GP/LP/HP; the photometric
   loss covers the whole render mask.
 - ``nextface-star``: ``nextface`` restricted to the face region h (NextFace* of the paper).
 - ``fast``: ``deface`` with fewer iterations, a 192-px working image and 256-px textures, for previews and
   tests.
-- ``deface``: the paper's method with the changes the benchmarks chose (each field's choice and its figures:
-  docs/design.md "Default preset", docs/textures.md, docs/skin-tone.md, BENCHMARKS.md):
-  M_o = M_R h instead of the distilled field g; ACE's eps 0.09 and n = 3 initial lights; Fourier features on
-  f's input; stage-3 maps as pyramids gated by the photos' pixels per texel, completed where unseen, stopped by
-  held-out pixels; the person's skin tone (free tone axis, lights held to the scene's illuminant); and what keeps
-  the person's dark albedo in the albedo (docs/textures.md "The person's detail"): L_lan in units of the face,
-  stage 2 weighing pixels by their shading evidence, an offline h that keeps pigment and the beard zone, and no
-  GP, LP or smooth-departure term.
 - ``deface-mean-skin``: ``deface`` before it kept the tone (the earlier default exactly, with L_pho's clipped
   channels as values again): the model's mean skin with free lights, so every
   person gets nearly the same pale texture. Its texture transfer between a shadowed and a clean photo of one
@@ -30,147 +32,76 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from deface.fit.config import (
-    DecoupleConfig,
-    FitConfig,
-    Iterations,
-    LearningRates,
-    LightConfig,
-    PriorConfig,
-    ToneConfig,
-    Weights,
-    override,
-)
-from deface.models.albedo_prior import AlbedoPriorConfig
-from deface.priors.face_region import SkinClassifierConfig
-from deface.priors.shading_evidence import ShadingEvidenceConfig
-from deface.texture.completion import CompletionConfig
-from deface.texture.pyramid import PyramidConfig
+from deface.fit.config import FitConfig, override
 
 # Chosen by the evaluation benchmark (BENCHMARKS.md records the comparison).
 DEFAULT_PRESET = "deface"
 
 
-def _paper() -> FitConfig:
-    return FitConfig(preset="paper")
-
-
-def _code(name: str, *, num_lights: int, epsilon: float, w1: float, w2: float, w4: float,
-          scale: float, sh_lr: float, stage2: int) -> FitConfig:
-    return FitConfig(
-        preset=name,
-        lights=LightConfig(num_lights=num_lights, init="code", init_scale=scale),
-        decouple=DecoupleConfig(epsilon=epsilon),
-        # The code's w0 = 1000 with a factor 2 inside L_pho: 2e3 in the paper's units.
-        weights=Weights(landmarks=w1, segmentation=w2, binary=w4),
-        iterations=Iterations(stage2=stage2),
-        learning_rates=LearningRates(lights=sh_lr),
-    )
-
-
-def _nextface(name: str, restrict_to_face: bool) -> FitConfig:
-    return FitConfig(
-        preset=name,
-        lights=LightConfig(num_lights=1),
-        decouple=DecoupleConfig(light_masks=False, face_region=False, restrict_to_face=restrict_to_face),
-        priors=PriorConfig(global_prior=False, local_prior=False, human_prior=False),
-    )
-
-
-# Octaves of Fourier features on f's (x, y, t) in the default preset: sharp shadow edges (blinds, leaves) need
-# them; more octaves let the masks follow a beard (docs/design.md "Default preset").
-FOURIER_OCTAVES = 4
-
-
-# Stage 3's early stop in `deface` and `fast`: less than 0.5 % loss decrease per 20 steps (Iterations): the last
-# steps of a fixed schedule hardly lowered the loss (benchmarks/history.md "Speed").
-STAGE3_TOLERANCE = 0.005
-
-# Stage 2's first half at half size in `deface` and `fast` (deface/fit/coarse.py): as good on the shadow pairs at
-# half the cost (benchmarks/history.md "Speed").
-STAGE2_COARSE_SHARE = 0.5
-
-# The tone stays at its start in `deface` (ToneConfig.learning_rate; BENCHMARKS.md "Skin tone").
-TONE_STEP = 0.0
-
-# Levels of the stage-3 texture pyramid in the default preset (deface/texture/pyramid.py, BENCHMARKS.md).
-TEXTURE_LEVELS = 5
-
-# Stage 3's diffuse step and the diffuse map's regularisers scale with T^0's level in `deface`
-# (LearningRates.stage3_diffuse_level, Weights.diffuse_level), so a dark skin is refined like a light one: the
-# step of 0.005 is the one stage 3 was tuned with on the model's mean skin (green 0.33: Jensen et al. 2001's mean
-# Rd, deface/models/albedo_prior.py; docs/textures.md).
-DIFFUSE_STEP_LEVEL = AlbedoPriorConfig().skin_rgb[1]
-
-# Stage 3 holds out 10 % of the face's pixels and keeps the step that predicts them best in `deface` and `fast`
-# (Iterations.stage3_holdout, deface/fit/holdout.py): later steps fit colour noise (docs/textures.md).
-STAGE3_HOLDOUT = 0.1
-
-
-# Stage 2's L_lan weight in `deface` and `fast`, its distances in units of the face's size (Weights.landmark_units).
-# With the paper's 1e-3 (squared working pixels) L_pho pulled the ICT blendshapes to their bounds (mouthClose 1 with
-# the jaw shut folds the lips over the nose) and the photo's beard landed on the nose's texels; the weight was
-# chosen on renders of known geometry (docs/textures.md "The person's detail").
-STAGE2_LANDMARKS = 1e4
-
-# Stage 2 in `deface` weighs pixels down where the photo has hair-like fine texture (deface/priors/shading_evidence.py):
-# its albedo model has no room for a beard, so the lights and masks explained it. A lower strength keeps more of a
-# beard and lets more of a shadow's edge into the map; 1.5 scored best against the true albedo (docs/textures.md
-# "The person's detail").
-SHADING_EVIDENCE = 1.5
-
-# The offline face region h in `deface`: the hull of the landmarks grown by 6 % of the face's size (the skin model
-# sets the face's edge), and the beard zone counted as face as face parsers count it (deface/priors/face_region.py).
-SKIN_CLASSIFIER = SkinClassifierConfig(hull_margin=0.06, beard_zone=True)
-
-
-def _deface() -> FitConfig:
-    return FitConfig(
-        preset="deface",
-        lights=LightConfig(num_lights=3),
-        decouple=DecoupleConfig(face_region=False, epsilon=0.09, fourier_frequencies=FOURIER_OCTAVES,
-                                clipped_as_bound=True),
-        iterations=Iterations(stage3_tolerance=STAGE3_TOLERANCE, stage2_coarse_share=STAGE2_COARSE_SHARE,
-                              stage3_holdout=STAGE3_HOLDOUT),
-        texture_pyramid=PyramidConfig(levels=TEXTURE_LEVELS),
-        completion=CompletionConfig(enabled=True),
-        tone=ToneConfig(free_tone=True, scene_light_prior=True, learning_rate=TONE_STEP),
-        learning_rates=LearningRates(stage3_diffuse_level=DIFFUSE_STEP_LEVEL),
-        weights=Weights(diffuse_level=DIFFUSE_STEP_LEVEL, landmarks=STAGE2_LANDMARKS, landmark_units="face"),
-        priors=PriorConfig(global_prior=False, local_prior=False),
-        shading_evidence=ShadingEvidenceConfig(strength=SHADING_EVIDENCE),
-        skin_classifier=SKIN_CLASSIFIER,
-    )
-
-
-def _deface_mean_skin() -> FitConfig:
-    return override(_deface(), preset="deface-mean-skin", tone=ToneConfig(),
-                    **{"decouple.clipped_as_bound": False, "iterations.stage2_coarse_share": 0.0,
-                       "iterations.stage3_holdout": 0.0,
-                       "learning_rates.stage3_diffuse_level": 0.0, "weights.diffuse_level": 0.0})
-
-
-def _fast() -> FitConfig:
-    return override(_deface(), preset="fast", resolution=192, texture_size=256, **{"render.shadow_rays": 64},
-                    iterations=Iterations(stage1=150, stage2=150, stage3=60, stage3_tolerance=STAGE3_TOLERANCE,
-                                          stage2_coarse_share=STAGE2_COARSE_SHARE, stage3_holdout=STAGE3_HOLDOUT),
-                    **{"decouple.ace_iteration": 50})
-
-
-PRESETS = {
-    "paper": _paper,
-    "deface": _deface,
-    "deface-mean-skin": _deface_mean_skin,
-    "code-images": lambda: _code("code-images", num_lights=5, epsilon=0.15, w1=1.0, w2=120, w4=20,
-                                 scale=1.5, sh_lr=0.007, stage2=500),
-    "code-video": lambda: _code("code-video", num_lights=5, epsilon=0.15, w1=0.5, w2=150, w4=15,
-                                scale=1.5, sh_lr=0.01, stage2=400),
-    "code-portrait": lambda: _code("code-portrait", num_lights=7, epsilon=0.09, w1=1.0, w2=120, w4=5,
-                                   scale=1.0, sh_lr=0.003, stage2=1500),
-    "nextface": lambda: _nextface("nextface", restrict_to_face=False),
-    "nextface-star": lambda: _nextface("nextface-star", restrict_to_face=True),
-    "fast": _fast,
+PAPER = {
+    "lights.num_lights": 5,
+    "decouple.face_region": True,
+    "decouple.epsilon": 0.17,
+    "decouple.clipped_as_bound": False,
+    "decouple.fourier_frequencies": 0,
+    "weights.landmarks": 1e-3,
+    "weights.landmark_units": "pixels",
+    "weights.diffuse_level": 0.0,
+    "iterations.stage2_coarse_share": 0.0,
+    "iterations.stage3_tolerance": 0.0,
+    "iterations.stage3_holdout": 0.0,
+    "learning_rates.stage3_diffuse_level": 0.0,
+    "priors.global_prior": True,
+    "priors.local_prior": True,
+    "tone.free_tone": False,
+    "tone.scene_light_prior": False,
+    "tone.learning_rate": 0.3,
+    "texture_pyramid.levels": 1,
+    "completion.enabled": False,
+    "skin_classifier.beard_zone": False,
+    "skin_classifier.hull_margin": 0.0,
+    "shading_evidence.strength": 0.0,
 }
+"""The paper's method (Table 6 and the authors' code) where the shipped method, FitConfig's defaults, departs
+from it (each field's docstring says why). These were FitConfig's defaults until issue 41, so a params.json
+written then that leaves a setting out ran with its value here (``config.from_dict``)."""
+
+
+def _code(*, num_lights: int, epsilon: float, w1: float, w2: float, w4: float, scale: float, sh_lr: float,
+          stage2: int) -> dict:
+    """An authors' code config: the paper's, with their light start, eps, w1, w2, w4, SH step and stage-2 length
+    (all given, also where they equal the paper's)."""
+    # The code's w0 = 1000 with a factor 2 inside L_pho: 2e3 in the paper's units, the default.
+    return {**PAPER, "lights.num_lights": num_lights, "lights.init": "code", "lights.init_scale": scale,
+            "decouple.epsilon": epsilon, "weights.landmarks": w1, "weights.segmentation": w2, "weights.binary": w4,
+            "iterations.stage2": stage2, "learning_rates.lights": sh_lr}
+
+
+NEXTFACE = {**PAPER, "lights.num_lights": 1, "decouple.light_masks": False, "decouple.face_region": False,
+            "decouple.restrict_to_face": False, "priors.global_prior": False, "priors.local_prior": False,
+            "priors.human_prior": False}
+"""The single-illumination baseline: the paper's settings with one light, no f, no g, no GP/LP/HP, L_pho over
+the whole render mask."""
+
+
+PRESETS: dict[str, dict] = {
+    "paper": PAPER,
+    "deface": {},
+    # `deface` before it kept the tone (the earlier default): the model's mean skin with free lights, L_pho's clipped
+    # channels as values, no half-size stage-2 steps, no held-out pixels, one diffuse step and absolute diffuse terms.
+    "deface-mean-skin": {"tone.free_tone": False, "tone.scene_light_prior": False, "tone.learning_rate": 0.3,
+                         "decouple.clipped_as_bound": False, "iterations.stage2_coarse_share": 0.0,
+                         "iterations.stage3_holdout": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
+                         "weights.diffuse_level": 0.0},
+    "code-images": _code(num_lights=5, epsilon=0.15, w1=1.0, w2=120, w4=20, scale=1.5, sh_lr=0.007, stage2=500),
+    "code-video": _code(num_lights=5, epsilon=0.15, w1=0.5, w2=150, w4=15, scale=1.5, sh_lr=0.01, stage2=400),
+    "code-portrait": _code(num_lights=7, epsilon=0.09, w1=1.0, w2=120, w4=5, scale=1.0, sh_lr=0.003, stage2=1500),
+    "nextface": NEXTFACE,
+    "nextface-star": {**NEXTFACE, "decouple.restrict_to_face": True},
+    "fast": {"resolution": 192, "texture_size": 256, "render.shadow_rays": 64, "iterations.stage1": 150,
+             "iterations.stage2": 150, "iterations.stage3": 60, "decouple.ace_iteration": 50},
+}
+"""Each preset as dotted-path changes (``config.override``) of FitConfig's defaults, which are DEFAULT_PRESET's."""
 
 
 DESCRIPTIONS = {
@@ -188,7 +119,7 @@ DESCRIPTIONS = {
     "nextface-star": "NextFace*: nextface with L_pho restricted to the face region h.",
     "fast": "deface with fewer steps, 192-px working image and 256-px textures: previews and tests.",
 }
-"""One line per preset (``deface presets``); the module docstring says why each differs from the paper."""
+"""One line per preset (``deface presets``); the module docstring says what each is for."""
 
 
 def names() -> list[str]:
@@ -196,11 +127,12 @@ def names() -> list[str]:
 
 
 def get(name: str) -> FitConfig:
-    """The preset's config; ``default`` resolves to DEFAULT_PRESET (recorded under its real name)."""
+    """The preset's config: the defaults with its PRESETS changes; ``default`` resolves to DEFAULT_PRESET
+    (recorded under its real name)."""
     key = DEFAULT_PRESET if name == "default" else name
     if key not in PRESETS:
         raise ValueError(f"unknown preset '{name}' (choose from: {', '.join(names())})")
-    return PRESETS[key]()
+    return override(FitConfig(preset=key), **PRESETS[key])
 
 
 def with_ablation(config: FitConfig, *, num_lights: int | None = None, light_masks: bool | None = None,

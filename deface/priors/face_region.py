@@ -90,14 +90,15 @@ class SkinClassifierConfig:
     """Robust trimming of the core's chroma, in MAD-based standard deviations."""
     smoothing: float = 0.015
     """Median filter size / blur sigma for the final map."""
-    beard_zone: bool = False
+    beard_zone: bool = True
     """The face below the nose's base within the face's outline (where beards and moustaches grow) is face
     whatever its colour, as face parsers label a beard skin: its albedo is the person's (deface/priors/
-    shading_evidence.py keeps its texture from pulling stage 2's lights). MediaPipe landmarks only."""
-    hull_margin: float = 0.0
+    shading_evidence.py keeps its texture from pulling stage 2's lights; docs/textures.md "The person's
+    detail"). MediaPipe landmarks only. Off in ``paper``."""
+    hull_margin: float = 0.06
     """The landmarks' convex hull, which bounds h, grows by this share of the face box's diagonal (0: 2 pixels). The
     hull of MediaPipe's points stops short of the hairline and the jaw's sides; the skin model, not the hull, is
-    then what sets the face's edge there."""
+    then what sets the face's edge there (docs/textures.md "The person's detail"; 0 in ``paper``)."""
     enclosed_area: float = 0.06
     """Non-skin patches enclosed by skin, each up to this share of the face region, are face: moles, freckles,
     a birthmark, a moustache or goatee, make-up. They lie on the face's surface (face parsers label them skin),

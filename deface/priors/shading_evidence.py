@@ -33,9 +33,11 @@ from deface.io.images import LUMINANCE
 class ShadingEvidenceConfig:
     """How stage 2 weighs pixels by their fine texture (``FitConfig.shading_evidence``)."""
 
-    strength: float = 0.0
-    """A pixel whose texture energy is this many times the face's median gets weight 1/e in stage 2's L_pho;
-    0 = every pixel counts alike (the paper)."""
+    strength: float = 1.5
+    """A pixel whose texture energy is this many times the face's median gets weight 1/e in stage 2's L_pho:
+    the albedo model has no room for a beard, so the lights and masks explained it. Lower keeps more of a beard
+    and lets more of a shadow's edge into the map; this scored best against the true albedo (docs/textures.md
+    "The person's detail"). 0 = every pixel counts alike (the paper)."""
     fine_scale: float = 0.008
     """Gaussian whose residue is the fine texture, as a share of the face's size (its landmarks' box diagonal):
     about a pixel at the default working size."""

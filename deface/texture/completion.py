@@ -30,9 +30,9 @@ MIN_TRUSTED = 50  # fewer trusted skin texels than this: no colour gain (g = 1)
 class CompletionConfig:
     """How unseen texels are filled (``FitConfig.completion``)."""
 
-    enabled: bool = False
-    """Fill unseen texels after stage 3 (off, as in the paper: the maps are stage 3's as they are; the deface
-    preset turns it on)."""
+    enabled: bool = True
+    """Fill unseen texels after stage 3 (docs/textures.md "Completion"). Off, as in the paper (``paper``): the
+    maps are stage 3's as they are."""
     seen_full: float = 0.5
     """A texel seen at least this squarely (visible x h x cos angle) keeps its fitted value."""
     blur: float = 0.01

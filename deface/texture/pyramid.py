@@ -31,8 +31,10 @@ from deface.texture import fast_pyramid
 class PyramidConfig:
     """The stage-3 texture parametrisation (``FitConfig.texture_pyramid``)."""
 
-    levels: int = 1
-    """Pyramid levels (1 = one free value per texel, the paper's parametrisation; the deface preset uses 5)."""
+    levels: int = 5
+    """Pyramid levels: coarse levels carry what the photos' pixels cannot resolve per texel, so a map does not
+    fill with per-texel colour noise (docs/textures.md "Stage 3's maps"). 1 = one free value per texel, the
+    paper's parametrisation (``paper``)."""
     min_side: int = 16
     """No level is coarser than this many texels per side (fewer levels on small maps)."""
     gated: bool = True
