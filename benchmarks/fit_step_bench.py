@@ -15,17 +15,17 @@ import argparse
 import statistics
 import time
 from contextlib import nullcontext
-from unittest import mock
 
 import torch
 
-from deface.fit import fast_stage3, pipeline, presets, stage3
+from deface.fit import pipeline, presets, stage3
 from deface.fit.config import override
 from deface.fit.log import FitLog
 from deface.fit.stage2 import _stage2_loss
 from deface.fit.texels import frame_views
 from deface.io.images import load_image
 from deface.paths import shared_dir
+from deface.render import kernels
 
 
 def main() -> None:
@@ -71,8 +71,8 @@ def _stage3_step(context, reference_terms: bool = False):
     views = frame_views(context.model, frozen, initial.diffuse.shape[0])
     parameters = stage3.TextureParameters(initial, stage3.texture_gates(context, views, initial.diffuse.shape[0]))
 
-    def switch():  # the fast path decides at objective construction (texture terms) and per step (LP)
-        return mock.patch.object(fast_stage3, "enabled", lambda *tensors: False) if reference_terms else nullcontext()
+    def switch():  # the ops choose their path per call
+        return kernels.on_reference("texture_terms", "local_prior_l1") if reference_terms else nullcontext()
 
     with switch():
         loss_of = stage3.objective(context, frozen, initial)

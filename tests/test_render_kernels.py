@@ -1,5 +1,6 @@
-"""The renderer's ops (deface/render/kernels): every registered op's fast numba path against its torch
-reference, values and gradients in float64, on 1 and 2 threads; then the whole render on both paths."""
+"""The registry's ops (deface/render/kernels, with the ops of kernels.OP_MODULES): every registered op's fast
+numba path against its torch reference, values and gradients in float64, on 1 and 2 threads; then the whole
+render on both paths."""
 
 from __future__ import annotations
 
@@ -8,14 +9,19 @@ import pytest
 import torch
 from test_render_gradients import Loss
 
+from deface.fit.fast_stage3 import TextureTerms
+from deface.losses.texture import PAPER_WEIGHTS
 from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.frame import render_frame
+from deface.render.mesh import Textures
 from deface.render.primitives import uv_sphere
 from deface.render.renderer import RenderConfig, Renderer, _pixel_rays, vertex_irradiance
 from deface.render.sh import cosine_lobe_coefficients
+from deface.texture.pyramid import level_gates
 
 pytestmark = pytest.mark.skipif(kernels.numba is None, reason="numba is not installed")
+OPS = kernels.load_ops()
 
 
 def both_paths(fn):
@@ -171,6 +177,83 @@ def _pixel_directions_cases():
             Case(np.arange(0, 120 * 90, 11), (90, 120), 150.0, (-210.5, 300.25), rotation, rtol=0, atol=1e-6)]
 
 
+def _nearest_triangles_cases():
+    """The gradient tests' scene, as seen and turned: no pixel centre on a shared edge, so the z-buffer finds
+    exactly Embree's triangles (tests below bound the disagreements where some centre is)."""
+    loss = Loss()
+    turned = loss.params["rotation"] + torch.tensor([0.2, 0.5, 0.1], dtype=loss.params["rotation"].dtype)
+    cases = []
+    for params in (loss.params, {**loss.params, "rotation": turned}):
+        cam = loss.camera(params).resolved()
+        pixels, depth = (t.detach() for t in cam.project(loss.mesh.vertices))
+
+        def trace(flat, cam=cam):
+            return loss.renderer.ray_scene(loss.mesh).first_triangles(*_pixel_rays(cam, flat))
+
+        cases.append(Case(pixels, depth, loss.mesh.triangles, cam.height, cam.width, trace))
+    return cases
+
+
+def _block_mean_cases():
+    gen = _gen()
+    return [Case(torch.rand(2, 4 * factor, 5 * factor, 3, generator=gen, dtype=torch.float64), factor, grads=(0,))
+            for factor in (2, 3)]
+
+
+def _pyramid_map_cases():
+    """Odd gates, 4 levels of a 32² map, the clamped first taps at the border."""
+    gen = _gen()
+    initial = torch.rand(32, 32, 3, dtype=torch.float64, generator=gen)
+    density = torch.rand(32, 32, generator=gen).numpy() * 1.5
+    gates = [gate.double() for gate in level_gates(density, [32, 16, 8, 4], power=2.0)]
+    levels = [torch.randn(3, *gate.shape, dtype=torch.float64, generator=gen) for gate in gates]
+    return [Case(initial, gates, *levels, grads=tuple(range(2, 2 + len(levels))))]
+
+
+def stage3_maps(size: int, seed: int, dtype=torch.float64) -> Textures:
+    """Random diffuse, specular and roughness maps (roughness inside (0.05, 1))."""
+    gen = torch.Generator().manual_seed(seed)
+
+    def rand(*shape):
+        return torch.rand(*shape, generator=gen, dtype=dtype)
+
+    return Textures(rand(size, size, 3), rand(size, size, 3), 0.05 + 0.95 * rand(size, size, 1))
+
+
+def soft_mask(height: int, width: int, seed: int, dtype=torch.float64) -> torch.Tensor:
+    """A soft mask with zeros, ones and fractions, not symmetric in u."""
+    values = torch.rand(height, width, generator=torch.Generator().manual_seed(seed), dtype=dtype)
+    return torch.where(values < 0.3, torch.zeros_like(values), torch.where(values > 0.7, 1.0, values))
+
+
+def _texture_terms_cases():
+    """Sizes 9 (a middle column that is its own mirror image) and 16, with and without GP, the diffuse
+    map's weights relative to a dark map's level (3.7) or not."""
+    palette = torch.rand(16, 3, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    cases = []
+    for size in (9, 16):
+        for colours in (palette, None):
+            for relative in (1.0, 3.7):
+                map_weights = dict(PAPER_WEIGHTS, diffuse=PAPER_WEIGHTS["diffuse"].relative(relative))
+                terms = TextureTerms(stage3_maps(size, 0), soft_mask(size, size, 2), colours, 0.2, 2e3, map_weights)
+                current = stage3_maps(size, 1)
+                cases.append(Case(current.diffuse, current.specular, current.roughness, terms, grads=(0, 1, 2),
+                                  atol=1e-14))
+    return cases
+
+
+def _local_prior_l1_cases():
+    cases = []
+    for channels in (1, 3):
+        gen = torch.Generator().manual_seed(8)
+        current = torch.rand(12, 10, channels, generator=gen, dtype=torch.float64)
+        reference = torch.rand(12, 10, channels, generator=gen, dtype=torch.float64)
+        mask = soft_mask(12, 10, 9)
+        mask[0, 0] = 1.0  # a corner pixel: replicate padding on two sides
+        cases.append(Case(current, reference, mask, grads=(0,), atol=1e-14))
+    return cases
+
+
 CASES = {
     "interpolate": _interpolate_cases,
     "filtered_interpolation": _filtered_interpolation_cases,
@@ -185,8 +268,14 @@ CASES = {
     "renumber": _renumber_cases,
     "triangle_box_pixels": _triangle_box_pixels_cases,
     "pixel_directions": _pixel_directions_cases,
+    "nearest_triangles": _nearest_triangles_cases,
+    "block_mean": _block_mean_cases,
+    "pyramid_map": _pyramid_map_cases,
+    "texture_terms": _texture_terms_cases,
+    "local_prior_l1": _local_prior_l1_cases,
 }
-"""Every op in kernels.OPS has its cases here: ``test_every_registered_op_has_cases`` fails otherwise."""
+"""Every op in kernels.OPS (load_ops) has its cases here: ``test_every_registered_op_has_cases`` fails
+otherwise."""
 
 
 def _outputs(function, case: Case) -> list[torch.Tensor]:
@@ -206,18 +295,25 @@ def _outputs(function, case: Case) -> list[torch.Tensor]:
     return results
 
 
+def test_only_listed_modules_register_ops():
+    """An op registered outside the package and OP_MODULES would escape load_ops, and so this test."""
+    with pytest.raises(ValueError, match="OP_MODULES"):
+        kernels.register("unlisted", reference=abs, fast=abs, supports=lambda x: True)
+    assert "unlisted" not in OPS
+
+
 def test_every_registered_op_has_cases():
     """A new op cannot be registered without a case in CASES (and so without being tested)."""
-    missing, stale = sorted(set(kernels.OPS) - set(CASES)), sorted(set(CASES) - set(kernels.OPS))
+    missing, stale = sorted(set(OPS) - set(CASES)), sorted(set(CASES) - set(OPS))
     assert not missing, f"ops without a test case in CASES: {missing}"
     assert not stale, f"CASES for ops that are not registered: {stale}"
 
 
-@pytest.mark.parametrize("name", sorted(kernels.OPS))
+@pytest.mark.parametrize("name", sorted(OPS))
 def test_op_fast_path_matches_reference_on_1_and_2_threads(name):
     """Values and gradients of the fast path equal the reference's (float64 rounding), and are bit-identical
     on 1 and 2 threads."""
-    op = kernels.OPS[name]
+    op = OPS[name]
     assert name in CASES, f"op {name!r} has no test case in CASES"
     for case in CASES[name]():
         with kernels.backend("torch"):

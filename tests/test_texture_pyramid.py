@@ -1,4 +1,5 @@
-"""The gated texture pyramid: level sizes, gates from texel density, start at T^0, gated gradients."""
+"""The gated texture pyramid: level sizes, gates from texel density, start at T^0, gated gradients (the op
+``pyramid_map``'s fast path against its reference: tests/test_render_kernels.py)."""
 
 from __future__ import annotations
 
@@ -56,30 +57,3 @@ def test_gradients_reach_each_level_scaled_by_its_gate():
         pyramid.levels[1][0, 3, 4] -= 2 * step
         minus = float((pyramid() * weights).sum())
     assert abs((plus - minus) / (2 * step) - float(coarse[0, 3, 4])) < 1e-6
-
-
-def test_fast_map_and_gradients_equal_the_torch_reference():
-    """deface/texture/fast_pyramid.py against TexturePyramid.reference (float64; odd gates, 4 levels, the
-    clamped first taps at the border)."""
-    from deface.render import kernels
-    from deface.texture import fast_pyramid
-
-    generator = torch.Generator().manual_seed(3)
-    initial = torch.rand(32, 32, 3, dtype=torch.float64, generator=generator)
-    density = torch.rand(32, 32, generator=generator).numpy() * 1.5
-    pyramid = TexturePyramid(initial, level_gates(density, [32, 16, 8, 4], power=2.0)).double()
-    with torch.no_grad():
-        for level in pyramid.levels:
-            level.copy_(torch.randn(level.shape, dtype=torch.float64, generator=generator))
-    weights = torch.rand(32, 32, 3, dtype=torch.float64, generator=generator)
-    results = {}
-    for path in ("numba", "torch"):
-        pyramid.zero_grad()
-        with kernels.backend(path):
-            assert fast_pyramid.enabled(pyramid.initial) == (path == "numba")
-            value = pyramid()
-        (value * weights).sum().backward()
-        results[path] = [value.detach(), *[level.grad.clone() for level in pyramid.levels]]
-    for fast, reference in zip(results["numba"], results["torch"], strict=True):
-        torch.testing.assert_close(fast, reference, rtol=1e-12, atol=1e-12)
-    assert not torch.equal(results["torch"][0], initial)  # the levels moved the map

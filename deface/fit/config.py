@@ -34,7 +34,7 @@ from deface.texture.pyramid import PyramidConfig
 
 __all__ = [  # the value handling lives in config_values; callers import it from here with the schema
     "RENAMED", "CropConfig", "DecoupleConfig", "FitConfig", "Iterations", "LearningRates", "LightConfig",
-    "PriorConfig", "RenderSettings", "Stage1Config", "ToneConfig", "Weights", "check_value", "differences",
+    "PriorConfig", "RenderConfig", "Stage1Config", "ToneConfig", "Weights", "check_value", "differences",
     "documentation", "field_type", "flatten", "from_dict", "override", "parse_value", "set_from_text",
     "supports_free_tone", "to_dict",
 ]

@@ -1,33 +1,37 @@
-"""Fused numba kernels for stage 3's texture-space and screen-space terms (the fast path of a step).
+"""Stage 3's texture-space and screen-space terms as ops (deface/render/kernels registers them): the torch
+references and fused numba kernels as their fast paths.
 
 A stage-3 step spent most of its time not in shading but in the regularisers of its 512² maps and in the
 5x5 local prior: each is a few dozen element-wise torch ops over ~0.8M values, and their backward twice as
-many (profile of a 256² default fit, 1 thread: ~400 of ~790 ms per step; BENCHMARKS.md, "Speed"). Here each
+many (profile of a 256² default fit, 1 thread: ~400 of ~790 ms per step; benchmarks/history.md). Here each
 term is one loop that computes the value *and* its gradient at once; the autograd functions return the
 stored gradient times the incoming one.
 
-- :func:`texture_terms`: ``weights.texture_regulariser`` x NextFace's texture regularisers
-  (:func:`deface.losses.texture.texture_regularisers`, the reference) plus ``weights.global_prior`` x GP
-  (:func:`deface.priors.global_prior.global_prior`, squared distance, masked mean).
-- :func:`local_prior_l1`: LP with the 5x5 window and the L1 norm (:func:`deface.priors.local_prior.local_prior`,
-  the reference), replicate padding.
+- ``texture_terms``: ``regulariser_weight`` x NextFace's texture regularisers
+  (:func:`deface.losses.texture.texture_regularisers`) plus ``prior_weight`` x GP
+  (:func:`deface.priors.global_prior.global_prior`, squared distance, masked mean), with the two parts'
+  values for the loss log, so both paths log the same terms.
+- ``local_prior_l1``: LP with the 5x5 window and the L1 norm (:func:`deface.priors.local_prior.local_prior`),
+  replicate padding.
 
-The formulas are the references' (tests/test_fast_stage3.py compares values and gradients in float64).
-Sums are accumulated in float64 in a fixed order on one thread, so results are deterministic and do not
-depend on the thread count; they differ from torch's float32 reductions only by rounding. Where a term is
-not differentiable (|0|, a tie between palette colours) the kernels take torch's choices: sign(0) = 0,
-the first nearest colour.
-
-The fast path runs for CPU tensors when numba is importable and ``DEFACE_RENDER_KERNELS`` is not ``torch``
-(:func:`deface.render.kernels.enabled`, the renderer's switch).
+The fast paths compute the references' formulas (tests/test_render_kernels.py compares values and gradients
+in float64). Sums are accumulated in float64 in a fixed order on one thread, so results are deterministic
+and do not depend on the thread count; they differ from torch's float32 reductions only by rounding. Where a
+term is not differentiable (|0|, a tie between palette colours) the kernels take torch's choices: sign(0) = 0,
+the first nearest colour. They run for CPU tensors of one float dtype when the registry's switch allows
+(numba importable, ``DEFACE_RENDER_KERNELS`` not ``torch``).
 """
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 import torch
 
-from deface.losses.texture import PAPER_WEIGHTS, RGB_TO_XYZ, MapWeights
+from deface.losses.texture import PAPER_WEIGHTS, RGB_TO_XYZ, MapWeights, texture_regularisers
+from deface.priors.global_prior import global_prior
+from deface.priors.local_prior import local_prior
 from deface.render import kernels
 from deface.render.mesh import Textures
 
@@ -39,14 +43,16 @@ except ImportError:  # pragma: no cover - exercised only where numba is missing
 MAP_NAMES = ("diffuse", "specular", "roughness")
 
 
-def enabled(*tensors: torch.Tensor) -> bool:
+def _fused(*tensors: torch.Tensor) -> bool:
     """Whether the fused kernels handle these tensors (the renderer's kernel switch, one float dtype)."""
-    return njit is not None and kernels.enabled(*tensors) and len({t.dtype for t in tensors}) == 1
+    return kernels.enabled(*tensors) and len({t.dtype for t in tensors}) == 1
 
 
 class TextureTerms:
     """The texture-space part of the stage-3 loss for fixed T^0, UV mask and palette: call it with the
-    current :class:`Textures` for ``regulariser_weight`` x regularisers + ``prior_weight`` x GP (a scalar).
+    current :class:`Textures` for (total, regularisers, GP), total = ``regulariser_weight`` x regularisers +
+    ``prior_weight`` x GP, the scalar to optimise, and its two parts' values (no gradient) to log; GP is 0
+    without a palette. The op ``texture_terms`` with these constants.
 
     initial: T^0; mask [Ht, Wt] the UV face mask; palette [k, 3] GP's colours (None = no GP).
     """
@@ -54,58 +60,92 @@ class TextureTerms:
     def __init__(self, initial: Textures, mask: torch.Tensor, palette: torch.Tensor | None,
                  regulariser_weight: float, prior_weight: float,
                  map_weights: dict[str, MapWeights] = PAPER_WEIGHTS):
-        dtype = initial.diffuse.dtype
-        self.references = tuple(_array(getattr(initial, name)) for name in MAP_NAMES)
-        self.mask = _array(mask.to(dtype))
-        self.palette = _array(palette.to(dtype)) if palette is not None else None
+        self.initial, self.mask, self.palette = initial, mask, palette
+        self.regulariser_weight, self.prior_weight, self.map_weights = regulariser_weight, prior_weight, map_weights
+
+    def __call__(self, textures: Textures) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        return texture_terms(textures.diffuse, textures.specular, textures.roughness, self)
+
+    def tensors(self) -> tuple[torch.Tensor, ...]:
+        """The constant tensors the fast path reads (T^0's maps, the mask)."""
+        return self.initial.diffuse, self.initial.specular, self.initial.roughness, self.mask
+
+    @cached_property
+    def arrays(self) -> _FusedConstants:
+        """The fast path's numpy constants, computed once (on its first call)."""
+        return _FusedConstants(self)
+
+
+class _FusedConstants:
+    def __init__(self, terms: TextureTerms):
+        dtype = terms.initial.diffuse.dtype
+        self.references = tuple(_array(getattr(terms.initial, name)) for name in MAP_NAMES)
+        self.mask = _array(terms.mask.to(dtype))
+        self.palette = _array(terms.palette.to(dtype)) if terms.palette is not None else None
+        map_weights = terms.map_weights
         self.weights = tuple(
             np.array([map_weights[name].symmetry, map_weights[name].reference, map_weights[name].chromaticity,
-                      map_weights[name].smoothness, map_weights[name].grey], dtype=np.float64) * regulariser_weight
+                      map_weights[name].smoothness, map_weights[name].grey], dtype=np.float64)
+            * terms.regulariser_weight
             for name in MAP_NAMES
         )
-        self.prior_weight = float(prior_weight)
+        self.prior_weight = float(terms.prior_weight)
         self.xyz = RGB_TO_XYZ.double().numpy()
         # chromaticity of T^0 is a constant of the fit
         self.reference_xy = tuple(_xy(reference, self.xyz) if reference.shape[-1] == 3 else None
                                   for reference in self.references)
 
-    def __call__(self, textures: Textures) -> torch.Tensor:
-        maps = tuple(getattr(textures, name) for name in MAP_NAMES)
-        return _TextureTerms.apply(self, *maps)
+
+def _texture_terms_reference(diffuse, specular, roughness, terms: TextureTerms):
+    """The torch path: deface/losses/texture.py's regularisers plus GP, summed in that order."""
+    regularisers = terms.regulariser_weight * texture_regularisers(
+        Textures(diffuse, specular, roughness), terms.initial, terms.mask, terms.map_weights)
+    if terms.palette is None:
+        return regularisers, regularisers.detach(), torch.zeros_like(regularisers.detach())
+    prior = terms.prior_weight * global_prior(diffuse, terms.palette, terms.mask)
+    return regularisers + prior, regularisers.detach(), prior.detach()
 
 
 class _TextureTerms(torch.autograd.Function):
     @staticmethod
     def forward(ctx, terms: TextureTerms, diffuse, specular, roughness):
-        total, grads = 0.0, []
+        constants = terms.arrays
+        total, regularisers, prior, grads = 0.0, 0.0, 0.0, []
         for index, texture in enumerate((diffuse, specular, roughness)):
             values = _array(texture)
             grad = np.zeros_like(values)
-            reference_xy = terms.reference_xy[index]
-            total += _map_terms(values, terms.references[index], terms.mask, terms.weights[index], terms.xyz,
-                                reference_xy if reference_xy is not None else np.zeros((1, 1, 2), values.dtype),
-                                reference_xy is not None, grad)
-            if index == 0 and terms.palette is not None and terms.prior_weight:
-                total += _palette_term(values, terms.palette, terms.mask, terms.prior_weight, grad)
+            reference_xy = constants.reference_xy[index]
+            value = _map_terms(values, constants.references[index], constants.mask, constants.weights[index],
+                               constants.xyz,
+                               reference_xy if reference_xy is not None else np.zeros((1, 1, 2), values.dtype),
+                               reference_xy is not None, grad)
+            total += value
+            regularisers += value
+            if index == 0 and constants.palette is not None and constants.prior_weight:
+                prior = _palette_term(values, constants.palette, constants.mask, constants.prior_weight, grad)
+                total += prior
             grads.append(torch.from_numpy(grad))
         ctx.grads = grads
-        return diffuse.new_tensor(total)
+        parts = diffuse.new_tensor(regularisers), diffuse.new_tensor(prior)
+        ctx.mark_non_differentiable(*parts)
+        return diffuse.new_tensor(total), *parts
 
     @staticmethod
-    def backward(ctx, grad_output):
+    def backward(ctx, grad_output, _grad_regularisers, _grad_prior):
         return (None, *(grad * grad_output for grad in ctx.grads))
 
 
-def texture_terms(textures: Textures, initial: Textures, mask: torch.Tensor, palette: torch.Tensor | None,
-                  regulariser_weight: float, prior_weight: float) -> torch.Tensor:
-    """One-off form of :class:`TextureTerms` (stage 3 builds the object once per fit)."""
-    return TextureTerms(initial, mask, palette, regulariser_weight, prior_weight)(textures)
+texture_terms = kernels.register(
+    "texture_terms",
+    reference=_texture_terms_reference,
+    fast=lambda diffuse, specular, roughness, terms: _TextureTerms.apply(terms, diffuse, specular, roughness),
+    supports=lambda diffuse, specular, roughness, terms: _fused(diffuse, specular, roughness, *terms.tensors()),
+)
+"""(diffuse, specular, roughness, :class:`TextureTerms`) -> (total, regularisers, GP): see TextureTerms."""
 
 
-def local_prior_l1(current: torch.Tensor, reference: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """LP (5x5 window, L1) of current vs reference [H, W, C] under pixel weights mask [H, W] (no gradient
-    to the reference or the mask; stage 3's are constants)."""
-    return _LocalPrior.apply(current, reference, mask)
+def _local_prior_l1_reference(current: torch.Tensor, reference: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    return local_prior(current, reference, mask)
 
 
 class _LocalPrior(torch.autograd.Function):
@@ -120,6 +160,16 @@ class _LocalPrior(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad_output):
         return ctx.grad * grad_output, None, None
+
+
+local_prior_l1 = kernels.register(
+    "local_prior_l1",
+    reference=_local_prior_l1_reference,
+    fast=_LocalPrior.apply,
+    supports=lambda current, reference, mask: _fused(current, reference, mask),
+)
+"""LP (5x5 window, L1) of current vs reference [H, W, C] under pixel weights mask [H, W] (the fast path has
+no gradient to the reference or the mask; stage 3's are constants)."""
 
 
 def _array(tensor: torch.Tensor) -> np.ndarray:

@@ -23,9 +23,8 @@ from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.fit.texels import frame_views
 from deface.losses import decouple as decouple_losses
-from deface.losses.texture import PAPER_WEIGHTS, SmoothDeparture, texture_regularisers
-from deface.priors.global_prior import global_prior, kmeans_palette
-from deface.priors.local_prior import local_prior
+from deface.losses.texture import PAPER_WEIGHTS, SmoothDeparture
+from deface.priors.global_prior import kmeans_palette
 from deface.render.frame import FrameCast, cast_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import RenderOutput
@@ -290,9 +289,7 @@ def _local_prior(output: RenderOutput, reference: AlbedoReference, coverage: tor
                  weights: tuple[float, float, float]) -> torch.Tensor:
     """LP on screen-space albedo, ``weights`` x (diffuse, specular, roughness) (the authors' 5 / 6 / 1)."""
     diffuse, specular, roughness = weights
-    prior = local_prior
-    if fast_stage3.enabled(output.diffuse, reference.diffuse, coverage):
-        prior = fast_stage3.local_prior_l1  # the same LP (5x5, L1), fused with its gradient
+    prior = fast_stage3.local_prior_l1  # the op: local_prior (5x5, L1) or, on the CPU, fused with its gradient
     return (diffuse * prior(output.diffuse, reference.diffuse, coverage)
             + specular * prior(output.specular, reference.specular, coverage)
             + roughness * prior(output.roughness, reference.roughness, coverage))
@@ -314,22 +311,20 @@ def _uv_mask(context: StageContext, initial: Textures) -> torch.Tensor:
 
 def _texture_terms_of(context: StageContext, initial: Textures, palette, uv_mask, relative: float):
     """(textures, terms) -> the texture-space terms, the diffuse map's relative to its level (``relative``,
-    :func:`relative_scale`): the fused kernels (deface/fit/fast_stage3.py) on the CPU, one named term for
-    regularisers and GP together; else the torch reference (deface/losses/texture.py, GP)."""
+    :func:`relative_scale`): the op ``texture_terms`` (deface/fit/fast_stage3.py; the torch reference,
+    deface/losses/texture.py and GP, or fused kernels on the CPU). Both log the same terms: the regularisers,
+    and GP when there is a palette."""
     weights = context.config.weights
     map_weights = dict(PAPER_WEIGHTS, diffuse=PAPER_WEIGHTS["diffuse"].relative(relative))
     global_weight = weights.global_prior * relative ** 2  # GP is a squared distance
-    if fast_stage3.enabled(initial.diffuse, initial.specular, initial.roughness, uv_mask):
-        fused = fast_stage3.TextureTerms(initial, uv_mask, palette, weights.texture_regulariser, global_weight,
+    constants = fast_stage3.TextureTerms(initial, uv_mask, palette, weights.texture_regulariser, global_weight,
                                          map_weights)
-        name = "texture_regularisers" if palette is None else "texture_regularisers_and_global_prior"
-        return lambda textures, terms: terms.add(name, fused(textures))
 
-    def texture_terms(textures: Textures, terms: LossTerms) -> torch.Tensor:  # the torch reference
-        loss = terms.add("texture_regularisers", weights.texture_regulariser * texture_regularisers(
-            textures, initial, uv_mask, map_weights))
+    def texture_terms(textures: Textures, terms: LossTerms) -> torch.Tensor:
+        total, regularisers, prior = constants(textures)
+        terms.add("texture_regularisers", regularisers)
         if palette is not None:
-            loss = loss + terms.add("global_prior", global_weight * global_prior(textures.diffuse, palette, uv_mask))
-        return loss
+            terms.add("global_prior", prior)
+        return total
 
     return texture_terms

@@ -1,17 +1,18 @@
-"""Block means for the supersampled renders (deface/render/supersample.py), as one numba loop.
+"""Block means for the supersampled renders (deface/render/supersample.py): the op ``block_mean``, the
+torch reference (avg_pool2d) and a numba loop as its fast path (deface/render/kernels registers it).
 
-``supersample._pool`` with torch permutes each channel-last buffer to channel-first, copies it, runs
-avg_pool2d and permutes back, forward and backward; a stage-3 step pools ~22 channels at 512² that way
-(~15 % of its time). Here the channel-last layout is read directly. The forward sums each block in row-major
-order and divides by its size (avg_pool2d's formula); the backward spreads grad / size over the block.
-Deterministic: every output element is written by one iteration. Tested against supersample's torch path
-(tests/test_fast_stage3.py).
+With torch each channel-last buffer is permuted to channel-first, copied, pooled by avg_pool2d and permuted
+back, forward and backward; a stage-3 step pools ~22 channels at 512² that way (~15 % of its time). The loop
+reads the channel-last layout directly. Its forward sums each block in row-major order and divides by its
+size (avg_pool2d's formula); its backward spreads grad / size over the block. Deterministic: every output
+element is written by one iteration. Tested against the reference with every op (tests/test_render_kernels.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from deface.render import kernels
 
@@ -21,14 +22,12 @@ except ImportError:  # pragma: no cover - exercised only where numba is missing
     njit = None
 
 
-def enabled(values: torch.Tensor) -> bool:
-    """Whether :func:`block_mean` handles ``values`` (the renderer's kernel switch, a float dtype)."""
-    return njit is not None and kernels.enabled(values) and values.dtype in (torch.float32, torch.float64)
-
-
-def block_mean(values: torch.Tensor, factor: int) -> torch.Tensor:
-    """Mean of each ``factor`` x ``factor`` block: [..., sH, sW, C] -> [..., H, W, C]."""
-    return _BlockMean.apply(values, factor)
+def _block_mean_reference(values: torch.Tensor, factor: int) -> torch.Tensor:
+    """avg_pool2d over the channel-first view of [..., sH, sW, C]."""
+    lead, (height, width, channels) = values.shape[:-3], values.shape[-3:]
+    planes = values.reshape(-1, height, width, channels).permute(0, 3, 1, 2)
+    pooled = F.avg_pool2d(planes, factor)
+    return pooled.permute(0, 2, 3, 1).reshape(*lead, height // factor, width // factor, channels)
 
 
 class _BlockMean(torch.autograd.Function):
@@ -48,6 +47,15 @@ class _BlockMean(torch.autograd.Function):
         out = np.empty((flat.shape[0], height, width, channels), dtype=flat.dtype)
         _block_spread(flat, ctx.factor, out)
         return torch.from_numpy(out).reshape(ctx.shape), None
+
+
+block_mean = kernels.register(
+    "block_mean",
+    reference=_block_mean_reference,
+    fast=_BlockMean.apply,
+    supports=lambda values, factor: kernels.enabled(values) and values.dtype in (torch.float32, torch.float64),
+)
+"""Mean of each ``factor`` x ``factor`` block: [..., sH, sW, C] -> [..., H, W, C]."""
 
 
 if njit is not None:

@@ -168,8 +168,9 @@ class Renderer:
         )
 
     def _cast_primary(self, mesh: Mesh, camera: Camera, projected: tuple) -> np.ndarray:
-        """[H*W] triangle ids; only pixels inside the projected bounding box of the mesh (with the numba
-        kernels: of some triangle) are traced. projected = camera.project(mesh.vertices)."""
+        """[H*W] triangle ids by ``kernels.nearest_triangles`` (Embree's rays in the triangles' projected
+        boxes, or its z-buffer) or, with a vertex behind the camera, by Embree's rays through the mesh's
+        projected bounding box. projected = camera.project(mesh.vertices)."""
         height, width = camera.height, camera.width
         pixels, depth = (t.detach() for t in projected)
         triangle_id = np.full(height * width, -1, dtype=np.int64)
@@ -183,17 +184,16 @@ class Renderer:
             x1, y1 = min(hi[0] + 1, width), min(hi[1] + 1, height)
         if x0 >= x1 or y0 >= y1:
             return triangle_id
-        if in_front and kernels.enabled(pixels):  # z-buffer: no Embree build per geometry (its reference)
-            return kernels.nearest_triangles(pixels.numpy(), depth.numpy(), mesh.triangles.cpu().numpy(),
-                                             height, width)
-        if in_front:
-            # only pixels inside some triangle's projected box (a ray elsewhere cannot hit): ~half as many rays
-            flat = kernels.triangle_box_pixels(pixels, mesh.triangles, height, width)
-        else:  # a vertex behind the camera: the whole box
-            ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
-            flat = (ys * width + xs).reshape(-1)
-        origins, directions = _pixel_rays(camera, flat)
-        triangle_id[flat] = self.ray_scene(mesh).first_triangles(origins, directions)
+
+        def trace(flat: np.ndarray) -> np.ndarray:  # the first triangle hit through each pixel centre ``flat``
+            return self.ray_scene(mesh).first_triangles(*_pixel_rays(camera, flat))
+
+        if in_front:  # the z-buffer's fast path builds no Embree scene per geometry
+            return kernels.nearest_triangles(pixels, depth, mesh.triangles, height, width, trace)
+        # a vertex behind the camera: the whole box
+        ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
+        flat = (ys * width + xs).reshape(-1)
+        triangle_id[flat] = trace(flat)
         return triangle_id
 
     def shadow_transfer(self, mesh: Mesh) -> ShadowTransfer:

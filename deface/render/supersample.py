@@ -11,7 +11,6 @@ pixel's area integral, and spreads the gradient over every texel the pixel cover
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 
 from deface.render import fast_box
 from deface.render.camera import Camera
@@ -60,10 +59,5 @@ def box_filter(output: RenderOutput, factor: int) -> RenderOutput:
 
 
 def _pool(values: torch.Tensor, factor: int) -> torch.Tensor:
-    """Block mean of [..., sH, sW, C] -> [..., H, W, C] (a numba loop on the CPU: deface/render/fast_box.py)."""
-    if fast_box.enabled(values):
-        return fast_box.block_mean(values, factor)
-    lead, (height, width, channels) = values.shape[:-3], values.shape[-3:]
-    planes = values.reshape(-1, height, width, channels).permute(0, 3, 1, 2)
-    pooled = F.avg_pool2d(planes, factor)
-    return pooled.permute(0, 2, 3, 1).reshape(*lead, height // factor, width // factor, channels)
+    """Block mean of [..., sH, sW, C] -> [..., H, W, C] (the op deface/render/fast_box.py registers)."""
+    return fast_box.block_mean(values, factor)

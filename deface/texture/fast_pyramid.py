@@ -1,17 +1,20 @@
-"""The texture pyramid's map, T^0 + sum_l up(g_l * P_l), as numba loops (deface/texture/pyramid.py).
+"""The texture pyramid's map, T^0 + sum_l up(g_l * P_l) (deface/texture/pyramid.py), as the op
+``pyramid_map``: the torch reference and numba loops as its fast path (deface/render/kernels registers it).
 
 With torch, each level of each map is gated, upsampled by ``F.interpolate`` (bilinear, align_corners False) to
 the full size, permuted and added, and the backward runs the same in reverse: 12 upsamplings of 512² maps
-and their copies per stage-3 step, ~17 % of it. Here one loop per level adds the level's four bilinear taps
-to the channel-first sum of the levels (added to T^0 once), and the backward spreads the gradient back along
-x, then along y (separable; every sum in a fixed order: deterministic). The taps are torch's (source index
-(i + 0.5) s / N - 0.5, clamped at 0). Tested against the torch path in float64 (tests/test_texture_pyramid.py).
+and their copies per stage-3 step, ~17 % of it. The fast path runs one loop per level that adds the level's
+four bilinear taps to the channel-first sum of the levels (added to T^0 once), and the backward spreads the
+gradient back along x, then along y (separable; every sum in a fixed order: deterministic). The taps are
+torch's (source index (i + 0.5) s / N - 0.5, clamped at 0). Tested against the reference in float64 with
+every op (tests/test_render_kernels.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from deface.render import kernels
 
@@ -21,14 +24,16 @@ except ImportError:  # pragma: no cover - exercised only where numba is missing
     njit = None
 
 
-def enabled(initial: torch.Tensor) -> bool:
-    """Whether :func:`pyramid_map` handles a map like ``initial`` (the renderer's kernel switch, a float dtype)."""
-    return njit is not None and kernels.enabled(initial) and initial.dtype in (torch.float32, torch.float64)
-
-
-def pyramid_map(initial: torch.Tensor, levels: list[torch.Tensor], gates: list[torch.Tensor]) -> torch.Tensor:
-    """T^0 [N, N, C] + sum_l up(gates[l] [s, s] * levels[l] [C, s, s]); differentiable in the levels."""
-    return _PyramidMap.apply(initial, gates, *levels)
+def _pyramid_map_reference(initial: torch.Tensor, gates: list[torch.Tensor], *levels: torch.Tensor) -> torch.Tensor:
+    """The map by torch ops: each gated level upsampled by ``F.interpolate`` and summed, then added to T^0."""
+    size = initial.shape[:2]
+    total = torch.zeros_like(initial).permute(2, 0, 1)  # [C, N, N]
+    for level, gate in zip(levels, gates, strict=True):
+        gated = level * gate
+        if gated.shape[-2:] != size:
+            gated = F.interpolate(gated[None], size=size, mode="bilinear", align_corners=False)[0]
+        total = total + gated
+    return initial + total.permute(1, 2, 0)
 
 
 def bilinear_taps(source: int, target: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,6 +79,17 @@ class _PyramidMap(torch.autograd.Function):
 
 def _numpy(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().contiguous().numpy()
+
+
+pyramid_map = kernels.register(
+    "pyramid_map",
+    reference=_pyramid_map_reference,
+    fast=_PyramidMap.apply,
+    supports=lambda initial, gates, *levels: kernels.enabled(initial) and initial.dtype in (torch.float32,
+                                                                                            torch.float64),
+)
+"""T^0 [N, N, C] + sum_l up(gates[l] [s, s] * levels[l] [C, s, s]), differentiable in the levels:
+``pyramid_map(initial, gates, *levels)``."""
 
 
 if njit is not None:

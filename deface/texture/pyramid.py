@@ -83,18 +83,12 @@ class TexturePyramid(torch.nn.Module):
             self.register_buffer(f"gate{index}", gate.detach().clone())
 
     def forward(self) -> torch.Tensor:
-        gates = [getattr(self, f"gate{index}") for index in range(len(self.levels))]
-        if fast_pyramid.enabled(self.initial):  # one loop per level (deface/texture/fast_pyramid.py)
-            return fast_pyramid.pyramid_map(self.initial, list(self.levels), gates)
-        return self.reference()
+        """The map: the op ``pyramid_map`` (deface/texture/fast_pyramid.py; one loop per level on the CPU)."""
+        return fast_pyramid.pyramid_map(self.initial, self._gates(), *self.levels)
 
     def reference(self) -> torch.Tensor:
-        """The map by torch ops (the definition the fast path is tested against)."""
-        size = self.initial.shape[:2]
-        total = torch.zeros_like(self.initial).permute(2, 0, 1)  # [C, N, N]
-        for index, level in enumerate(self.levels):
-            gated = level * getattr(self, f"gate{index}")
-            if gated.shape[-2:] != size:
-                gated = F.interpolate(gated[None], size=size, mode="bilinear", align_corners=False)[0]
-            total = total + gated
-        return self.initial + total.permute(1, 2, 0)
+        """The map by torch ops (the op's reference, the definition the fast path is tested against)."""
+        return fast_pyramid.pyramid_map.reference(self.initial, self._gates(), *self.levels)
+
+    def _gates(self) -> list[torch.Tensor]:
+        return [getattr(self, f"gate{index}") for index in range(len(self.levels))]

@@ -1,7 +1,8 @@
-"""The renderer's CPU hot loops as a registry of ops, each a pair of a torch reference and a fast numba
-path: ``OPS[name] = Op(reference, fast, supports)``; calling ``kernels.<op>(...)`` runs the fast path for
-CPU tensors when numba is importable, ``DEFACE_RENDER_KERNELS`` is not ``torch`` and ``supports`` accepts
-the arguments (dtypes, shapes), else the reference. tests/test_render_kernels.py runs every registered op
+"""The CPU hot loops as a registry of ops, each a pair of a torch reference and a fast numba path:
+``OPS[name] = Op(reference, fast, supports)``; calling an op runs the fast path for CPU tensors when numba is
+importable, ``DEFACE_RENDER_KERNELS`` is not ``torch`` and ``supports`` accepts the arguments (dtypes,
+shapes), else the reference, which is the code path of a run without the fast paths. Call sites choose
+through the op, never by a switch of their own. tests/test_render_kernels.py runs every registered op
 against its reference (values and gradients in float64, on 1 and 2 threads) and fails for an op it has no
 case for.
 
@@ -15,9 +16,16 @@ around them and the registration (the dispatch rule):
     reflection.py      reflect                               mirrored view directions per vertex
     texture.py         sample_texture (+ texel scatter)      bilinear lookup, grid_sample semantics
     shading.py         shade                                 the fused pixel stage (every screen buffer)
-    selection.py       renumber, triangle_box_pixels,        used vertices, primary-ray pixels and directions;
-                       pixel_directions (+ nearest_triangles) the z-buffer that replaces the primary rays
-    base.py            backend switch, threads, serial/parallel compilation, ``Op`` and ``register``
+    selection.py       renumber, triangle_box_pixels,        used vertices, primary-ray pixels and directions,
+                       pixel_directions, nearest_triangles   primary visibility (Embree's rays or a z-buffer)
+    base.py            backend switch, threads, serial/parallel compilation, ``Op``, ``register``, ``OPS``
+
+and, outside this package (``OP_MODULES``, imported by ``load_ops``; ``register`` refuses other modules):
+
+    deface/render/fast_box.py       block_mean                  the supersampled buffers' block means
+    deface/texture/fast_pyramid.py  pyramid_map                 the texture pyramid's map from its levels
+    deface/fit/fast_stage3.py       texture_terms,              stage 3's texture regularisers + GP (and
+                                    local_prior_l1              each part's value for the log), its LP
 
 Why: the torch versions spend their time in hundreds of small ops, broadcasts and [N, B*C] temporaries;
 one loop per pixel needs neither (figures in benchmarks/render.md).
@@ -36,7 +44,19 @@ module's kernel uses (texture.py's bilinear helpers in shading.py, say), delete 
 """
 
 from deface.render.kernels.barycentrics import barycentrics, barycentrics_backward, barycentrics_forward
-from deface.render.kernels.base import OPS, Op, backend, enabled, numba, register, set_threads, thread_count
+from deface.render.kernels.base import (
+    OP_MODULES,
+    OPS,
+    Op,
+    backend,
+    enabled,
+    load_ops,
+    numba,
+    on_reference,
+    register,
+    set_threads,
+    thread_count,
+)
 from deface.render.kernels.interpolation import (
     filtered_interpolation,
     interpolate,
@@ -75,6 +95,7 @@ from deface.render.kernels.texture import bilinear_backward, bilinear_forward, s
 
 __all__ = [
     "OPS",
+    "OP_MODULES",
     "SCREEN_BUFFERS",
     "SCREEN_CHANNELS",
     "Op",
@@ -91,7 +112,9 @@ __all__ = [
     "interpolate_backward_values",
     "interpolate_forward",
     "kernel_constants",
+    "load_ops",
     "numba",
+    "on_reference",
     "pixel_directions",
     "plain_slices",
     "plain_values",

@@ -3,7 +3,9 @@ serial/parallel numba compilation, and the registry of ops (torch reference, fas
 
 from __future__ import annotations
 
+import importlib
 import os
+import sys
 import types
 from collections.abc import Callable
 from contextlib import contextmanager
@@ -45,6 +47,24 @@ def backend(name: str):
         yield
     finally:
         _backend = previous
+
+
+_on_reference: frozenset[str] = frozenset()
+
+
+@contextmanager
+def on_reference(*names: str):
+    """Temporarily run the ops ``names`` on their torch reference, the others as selected (a benchmark's
+    "what do these fast paths save")."""
+    global _on_reference
+    unknown = sorted(set(names) - set(load_ops()))
+    if unknown:
+        raise ValueError(f"kernels.on_reference: no op named {unknown}")
+    previous, _on_reference = _on_reference, _on_reference | frozenset(names)
+    try:
+        yield
+    finally:
+        _on_reference = previous
 
 
 def _array(tensor: torch.Tensor) -> np.ndarray:
@@ -136,19 +156,36 @@ class Op(NamedTuple):
 
     def use_fast(self, *args) -> bool:
         """Whether a call with these arguments runs the fast path."""
-        return numba is not None and _backend != "torch" and self.supports(*args)
+        return numba is not None and _backend != "torch" and self.name not in _on_reference and self.supports(*args)
 
     def __call__(self, *args):
         return (self.fast if self.use_fast(*args) else self.reference)(*args)
 
 
 OPS: dict[str, Op] = {}
-"""Every registered op by name (tests/test_render_kernels.py runs each one against its reference)."""
+"""Every registered op by name (tests/test_render_kernels.py runs each one against its reference); the ops
+of OP_MODULES appear once those are imported (``load_ops``)."""
+
+OP_MODULES = ("deface.render.fast_box", "deface.texture.fast_pyramid", "deface.fit.fast_stage3")
+"""The modules outside this package that register ops (fast paths of the supersampling, the texture pyramid
+and stage 3's terms). ``register`` refuses any other module, so no op escapes ``load_ops`` and the test."""
 
 
 def register(name: str, reference: Callable, fast: Callable, supports: Callable[..., bool]) -> Op:
     """Add an op to ``OPS`` and return it (the module-level callable of the op)."""
+    module = sys._getframe(1).f_globals.get("__name__", "")
+    if not module.startswith(__package__ + ".") and module not in OP_MODULES:
+        raise ValueError(f"kernels.register: {module} registers op {name!r} but is not in kernels.OP_MODULES "
+                         "(add it there so that load_ops and tests/test_render_kernels.py see its ops)")
     if name in OPS:
         raise ValueError(f"kernels.register: an op named {name!r} is already registered")
     OPS[name] = op = Op(name, reference, fast, supports)
     return op
+
+
+def load_ops() -> dict[str, Op]:
+    """``OPS`` with every op registered: imports OP_MODULES (they import this package, so it cannot import
+    them itself)."""
+    for module in OP_MODULES:
+        importlib.import_module(module)
+    return OPS

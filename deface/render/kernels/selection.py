@@ -1,14 +1,18 @@
 """Which vertices and pixels a render touches (no gradients): the vertices used by the covered pixels'
 corners renumbered into that subset (``renumber``), the pixels whose centre lies in some projected
 triangle's box (``triangle_box_pixels``: the primary rays worth tracing), the primary rays' unit
-directions (``pixel_directions``), and the primary visibility itself by z-buffer (``nearest_triangles``:
-the fast path of Embree's primary rays, which are its reference; not an ``Op`` because a pixel centre on an
-edge shared by two triangles may go to either, tests/test_render_kernels.py compares the two).
+directions (``pixel_directions``), and the primary visibility itself (``nearest_triangles``: Embree's
+primary rays through those pixels, the reference, or a z-buffer, the fast path).
 
-References: torch / numpy array ops. Fast: single passes in numba (no sorts, no index ops).
+References: torch / numpy array ops, Embree for the visibility. Fast: single passes in numba (no sorts, no
+index ops). The z-buffer and Embree agree except where a pixel centre lies on an edge shared by two
+triangles (within float32 rounding), which either may take: the registry's case for it has no such pixel,
+and tests/test_render_kernels.py bounds the disagreements on the fit's meshes.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -159,16 +163,26 @@ def _mark_triangle_boxes(pixels, triangles, mask):
                 mask[y, x] = True
 
 
-def nearest_triangles(pixels: np.ndarray, depth: np.ndarray, triangles: np.ndarray, height: int,
-                      width: int) -> np.ndarray:
-    """Primary visibility by z-buffer: [H * W] int64, per pixel the nearest triangle whose projection contains
-    the pixel centre (-1: none), from the vertices projected to pixels [V, 2] and their camera depths [V] (all
-    in front of the camera), triangles [F, 3]. Nearest by perspective-correct depth (1 / z is linear in the
-    screen-space barycentrics); a centre exactly on an edge belongs to both triangles (the nearer wins, then
-    the lower id). About a millisecond for the 256² face, against ~20 for an Embree build and cast."""
+def _nearest_triangles_reference(pixels: torch.Tensor, depth: torch.Tensor, triangles: torch.Tensor, height: int,
+                                 width: int, trace: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """Embree's primary rays: ``trace(flat)`` (the first triangle hit through each pixel centre ``flat``, -1:
+    none) for the pixels inside some triangle's projected box (a ray elsewhere cannot hit), -1 elsewhere."""
     ids = np.full(height * width, -1, dtype=np.int64)
-    _zbuffer(np.ascontiguousarray(pixels, dtype=np.float64), np.ascontiguousarray(depth, dtype=np.float64),
-             np.ascontiguousarray(triangles, dtype=np.int64), height, width, ids)
+    flat = triangle_box_pixels(pixels, triangles, height, width)  # ~half the box's pixels
+    ids[flat] = trace(flat)
+    return ids
+
+
+def _nearest_triangles_fast(pixels: torch.Tensor, depth: torch.Tensor, triangles: torch.Tensor, height: int,
+                            width: int, trace: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """The z-buffer: nearest by perspective-correct depth (1 / z is linear in the screen-space barycentrics); a
+    centre exactly on an edge belongs to both triangles (the nearer wins, then the lower id). ``trace`` is not
+    called: no Embree scene is built. About a millisecond for the 256² face, against ~20 for an Embree build
+    and cast."""
+    ids = np.full(height * width, -1, dtype=np.int64)
+    _zbuffer(np.ascontiguousarray(_array(pixels), dtype=np.float64),
+             np.ascontiguousarray(_array(depth), dtype=np.float64),
+             np.ascontiguousarray(_array(triangles), dtype=np.int64), height, width, ids)
     return ids
 
 
@@ -230,3 +244,14 @@ pixel_directions = register(
 """Unit model-frame directions [N, 3] (float32) through the centres of the pixels ``flat`` (y * W + x) of an
 image size = (H, W), for a camera of ``focal`` (pixels, a float), principal point ``centre`` (x, y pixels) and
 rotation [3, 3] (numpy)."""
+
+nearest_triangles = register(
+    "nearest_triangles",
+    reference=_nearest_triangles_reference,
+    fast=_nearest_triangles_fast,
+    supports=lambda pixels, depth, triangles, height, width, trace: enabled(pixels),
+)
+"""Primary visibility: [H * W] int64, per pixel the nearest triangle whose projection contains the pixel
+centre (-1: none), from the vertices projected to pixels [V, 2] and their camera depths [V] (all in front of
+the camera), triangles [F, 3], H, W and ``trace``, flat pixel indices -> the first triangle Embree's ray
+through each centre hits (the reference's rays)."""
