@@ -152,19 +152,19 @@ def _fit_render(task: tuple) -> dict:
 
 def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_dir: Path, models_dir=None) -> dict:
     """Fit a render, write the fit (and its albedo under a neutral light) to ``result_dir``, score its map."""
-    from deface.export.files import save_png
     from deface.export.outputs import write_fit
     from deface.fit.log import FitLog
     from deface.fit.pipeline import fit
-    from deface.io.images import load_image, srgb_to_linear
+    from deface.io.images import load_image, save_png, srgb_to_linear
     from deface.models.ict_build import read_obj
     from deface.render.sh import white_light
+    from deface.report.html import write_report
 
     started = time.perf_counter()
     path = folder / "images" / render.file
     result = fit([load_image(path)], config, models_dir=models_dir, source=str(path), log=FitLog(quiet=True))
     seconds = time.perf_counter() - started
-    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]})
+    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]}, page=write_report)
     neutral = result.render(lights=white_light(config.lights.bands))[0].face
     save_png(result_dir / "neutral.png", neutral.clamp(0, 1).numpy())
     mesh_path = folder / "mesh.obj"

@@ -98,18 +98,18 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
     """Fit ``path``, write the fit and a neutral-light render into ``result_dir``, return the tone record."""
 
     from deface.eval.protocol import fit_detail
-    from deface.export.files import save_png
     from deface.export.outputs import write_fit
     from deface.fit.log import FitLog
     from deface.fit.pipeline import fit
-    from deface.io.images import linear_to_srgb, load_image
+    from deface.io.images import linear_to_srgb, load_image, save_png
     from deface.models.ita import photo_tone, pixel_uvs, texture_ita
     from deface.render.sh import white_light
+    from deface.report.html import write_report
 
     started = time.perf_counter()
     result = fit([load_image(path)], config, models_dir=models_dir, source=str(path), log=FitLog(quiet=True))
     seconds = time.perf_counter() - started
-    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]})
+    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]}, page=write_report)
     neutral = result.render(lights=white_light(config.lights.bands))[0].face
     save_png(result_dir / "neutral.png", neutral.clamp(0, 1).numpy())
     frame = result.frames[0]
