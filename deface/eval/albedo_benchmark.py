@@ -16,15 +16,15 @@ texels; without masks the whole shown face is the region and its own reference.
 from __future__ import annotations
 
 import csv
-import json
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from deface.batch.recorded import RecordedTask, run_recorded
 from deface.eval import albedo_measures as measures
-from deface.eval.benchmark import cached_scores, config_json, map_in_processes
 from deface.fit.config import FitConfig
 
 MAX_ANGLE = 70.0
@@ -137,19 +137,6 @@ def similarity_aligned(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     return scale * a @ rotation + target_mean
 
 
-def _fit_render(task: tuple) -> dict:
-    """Worker: fit one render, write its outputs and scores.json (cached by configuration)."""
-    folder, render, variant, config, out_dir, models_dir = task
-    result_dir = Path(out_dir) / variant / render.stem
-    cached = cached_scores(result_dir / "scores.json", config)
-    if cached is not None:
-        return cached
-    record = measure_render(Path(folder), render, config, result_dir, models_dir)
-    record["config"] = config_json(config)
-    (result_dir / "scores.json").write_text(json.dumps(record, indent=1))
-    return record
-
-
 def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_dir: Path, models_dir=None) -> dict:
     """Fit a render, write the fit (and its albedo under a neutral light) to ``result_dir``, score its map."""
     from deface.export.outputs import write_fit
@@ -182,19 +169,26 @@ def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_
 
 def run_albedo_benchmark(folder: Path, out_dir: Path, variants: dict[str, FitConfig], jobs: int = 2,
                          models_dir=None, log=print) -> dict:
-    """Fit every render with every variant {name: config}; returns {variant: {stem: record}}."""
+    """Fit every render with every variant {name: config}, each recorded in OUT/<variant>/<render>/scores.json with
+    its configuration (not refitted while it holds); returns {variant: {stem: record}}."""
     renders = read_truth_set(folder)
-    tasks = [(str(folder), r, name, config, str(out_dir), models_dir) for name, config in variants.items()
-             for r in renders]
-    records: dict = {name: {} for name in variants}
-    for task, record in zip(tasks, map_in_processes(_fit_render, tasks, jobs), strict=True):
-        render, name = task[1], task[2]
-        records[name][render.stem] = record
+    runs = [(name, render) for name in variants for render in renders]
+    tasks = []
+    for name, render in runs:
+        config, result_dir = variants[name], Path(out_dir) / name / render.stem
+        tasks.append(RecordedTask(f"{name} / {render.stem}", result_dir / "scores.json", config,
+                                  partial(measure_render, Path(folder), render, config, result_dir, models_dir)))
+
+    def logged(index: int, record: dict) -> None:
         face = record["scores"][FACE]
-        log(f"{name} / {render.stem}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}"
+        log(f"{tasks[index].name}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}"
             + "".join(f", {region} kept {s['darkness_kept']:.2f} fine {s['fine_structure']:.2f}"
                       for region, s in record["scores"].items() if region != FACE)
             + f" ({record['seconds']:.0f} s)")
+
+    records: dict = {name: {} for name in variants}
+    for (name, render), record in zip(runs, run_recorded(tasks, jobs, models_dir, logged), strict=True):
+        records[name][render.stem] = record
     return records
 
 

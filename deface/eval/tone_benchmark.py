@@ -27,12 +27,13 @@ import csv
 import json
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from scipy import stats
 
-from deface.eval.benchmark import cached_scores, config_json, map_in_processes
+from deface.batch.recorded import RecordedTask, run_recorded
 from deface.eval.sheets import image_grid
 from deface.fit import presets
 from deface.fit.config import FitConfig, override, set_from_text
@@ -77,21 +78,14 @@ def variant_config(preset: str, schedule: dict) -> FitConfig:
     return override(presets.get(preset), **schedule)
 
 
-def _fit_photo(task: tuple) -> dict:
-    """Worker: fit one photo with one variant, write its outputs and tone.json; cached by configuration."""
-    folder, photo, preset, schedule, out_dir, models_dir = task
-    result_dir = Path(out_dir) / preset / photo.stem
+def photo_config(photo: TonePhoto, preset: str, schedule: dict) -> FitConfig:
+    """A variant's configuration for one photo: the photo's own settings (its card) are the method's; NextFace has
+    no white level."""
     config = variant_config(preset, schedule)
-    if preset != BASELINE:  # the photo's own settings (its card) are the method's; NextFace has no white level
+    if preset != BASELINE:
         for assignment in photo.settings:
             config = set_from_text(config, assignment)
-    cached = cached_scores(result_dir / "tone.json", config)
-    if cached is not None:
-        return cached
-    record = measure_photo(Path(folder) / "images" / photo.file, config, result_dir, models_dir)
-    record["config"] = config_json(config)
-    (result_dir / "tone.json").write_text(json.dumps(record, indent=1))
-    return record
+    return config
 
 
 def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=None) -> dict:
@@ -128,16 +122,26 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
 
 def run_tone_benchmark(folder: Path, out_dir: Path, preset: str, baseline: bool, schedule: dict,
                        jobs: int = 2, models_dir=None, log=print) -> dict:
-    """Fit every photo with ``preset`` (and NextFace when ``baseline``); returns {variant: {stem: record}}."""
+    """Fit every photo with ``preset`` (and NextFace when ``baseline``), each recorded in OUT/<variant>/<photo>/
+    tone.json with its configuration (not refitted while it holds); returns {variant: {stem: record}}."""
     photos = read_manifest(folder)
     variants = [preset] + ([BASELINE] if baseline and preset != BASELINE else [])
-    tasks = [(str(folder), p, v, schedule, str(out_dir), models_dir) for v in variants for p in photos]
-    records: dict = {v: {} for v in variants}
-    for task, record in zip(tasks, map_in_processes(_fit_photo, tasks, jobs), strict=True):
-        variant, photo = task[2], task[1]
-        records[variant][photo.stem] = record
-        log(f"{variant} / {photo.stem}: albedo ITA {record['albedo_ita']:.1f}, reference "
+    runs = [(v, p) for v in variants for p in photos]
+    tasks = []
+    for variant, photo in runs:
+        config, result_dir = photo_config(photo, variant, schedule), Path(out_dir) / variant / photo.stem
+        tasks.append(RecordedTask(f"{variant} / {photo.stem}", result_dir / "tone.json", config,
+                                  partial(measure_photo, Path(folder) / "images" / photo.file, config, result_dir,
+                                          models_dir)))
+
+    def logged(index: int, record: dict) -> None:
+        photo = runs[index][1]
+        log(f"{tasks[index].name}: albedo ITA {record['albedo_ita']:.1f}, reference "
             f"{reference_ita(photo, record):.1f} ({record['seconds']:.0f} s)")
+
+    records: dict = {v: {} for v in variants}
+    for (variant, photo), record in zip(runs, run_recorded(tasks, jobs, models_dir, logged), strict=True):
+        records[variant][photo.stem] = record
     return records
 
 
