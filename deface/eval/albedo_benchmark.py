@@ -15,7 +15,6 @@ texels; without masks the whole shown face is the region and its own reference.
 
 from __future__ import annotations
 
-import csv
 import time
 from dataclasses import dataclass
 from functools import partial
@@ -25,6 +24,7 @@ import numpy as np
 
 from deface.batch.recorded import RecordedTask, run_recorded
 from deface.eval import albedo_measures as measures
+from deface.eval.manifest import read_manifest_rows
 from deface.fit.config import FitConfig
 
 MAX_ANGLE = 70.0
@@ -48,13 +48,7 @@ class TruthRender:
 
 def read_truth_set(folder: Path) -> list[TruthRender]:
     """The renders of a truth set; one-line errors for a missing manifest, image or albedo."""
-    manifest = folder / "MANIFEST.tsv"
-    if not manifest.is_file():
-        raise ValueError(f"{folder}: no MANIFEST.tsv (a column 'file'; see deface/eval/albedo_benchmark.py)")
-    with manifest.open(newline="") as handle:
-        rows = list(csv.DictReader(handle, delimiter="\t"))
-    if not rows or "file" not in rows[0]:
-        raise ValueError(f"{manifest}: no rows, or no column 'file'")
+    manifest, rows = read_manifest_rows(folder, ("file",), "a column 'file'; see deface/eval/albedo_benchmark.py")
     renders = [TruthRender(row["file"], _albedo_name(row), _light_name(row)) for row in rows]
     for render in renders:
         for path in (folder / "images" / render.file, folder / "albedo" / render.albedo):
@@ -200,6 +194,15 @@ def summary(records: dict) -> dict:
             for measure, value in values.items():
                 table.setdefault(region, {}).setdefault(measure, []).append(value)
     return {region: {m: _mean(v) for m, v in values.items()} for region, values in table.items()}
+
+
+def summary_line(variant: str, figures: dict) -> str:
+    """One line of a variant's :func:`summary` for the console."""
+    face = figures[FACE]
+    regions = ", ".join(f"{r} kept {v['darkness_kept']:.2f} fine {v['fine_structure']:.2f}"
+                        for r, v in figures.items() if r != FACE)
+    return (f"{variant}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}, colour noise "
+            f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f}); {regions}")
 
 
 def _mean(values: list[float]) -> float:

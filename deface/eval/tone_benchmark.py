@@ -23,7 +23,6 @@ proxy is the proxy's own.
 
 from __future__ import annotations
 
-import csv
 import json
 import time
 from dataclasses import dataclass
@@ -34,6 +33,7 @@ import numpy as np
 from scipy import stats
 
 from deface.batch.recorded import RecordedTask, run_recorded
+from deface.eval.manifest import read_manifest_rows
 from deface.eval.sheets import image_grid
 from deface.fit import presets
 from deface.fit.config import FitConfig, override, set_from_text
@@ -58,14 +58,7 @@ class TonePhoto:
 
 def read_manifest(folder: Path) -> list[TonePhoto]:
     """The photos of a skin-tone folder; one-line errors for a missing manifest, column or image."""
-    manifest = folder / "MANIFEST.tsv"
-    if not manifest.is_file():
-        raise ValueError(f"{folder}: no MANIFEST.tsv (columns file, tone_group[, gt_ita])")
-    with manifest.open(newline="") as handle:
-        rows = list(csv.DictReader(handle, delimiter="\t"))
-    missing = {"file", "tone_group"} - set(rows[0] if rows else {})
-    if missing:
-        raise ValueError(f"{manifest}: missing column(s) {', '.join(sorted(missing))}")
+    _, rows = read_manifest_rows(folder, ("file", "tone_group"), "columns file, tone_group[, gt_ita]")
     photos = [TonePhoto(r["file"], r["tone_group"], float(r["gt_ita"]) if r.get("gt_ita") else None,
                         tuple(s.strip() for s in (r.get("settings") or "").split(";") if s.strip())) for r in rows]
     absent = [p.file for p in photos if not (folder / "images" / p.file).is_file()]
@@ -179,6 +172,16 @@ def summary(photos: list[TonePhoto], records: dict) -> dict:
             "group_detail": group_detail, **_interval_figures(photos, records, reference),
             "bias": float(np.std(list(group_mae.values()))), "spearman": rho, "slope": slope,
             "mean_signed": float(np.nanmean(albedo - reference)), "photos": int(valid.sum())}
+
+
+def summary_line(variant: str, figures: dict) -> str:
+    """One line of a variant's :func:`summary` for the console."""
+    groups = ", ".join(f"{g} {v:.1f}" for g, v in figures["group_mae"].items())
+    speckles = ", ".join(f"{g} {v:.2f}" for g, v in figures["group_speckle"].items())
+    details = ", ".join(f"{g} {v:.2f}" for g, v in figures["group_detail"].items())
+    texture = "" if variant == PROXY else f"; speckle {speckles}; detail {details}"
+    return (f"{variant}: MAE {figures['mae']:.1f}, groups {groups}, bias {figures['bias']:.2f}, "
+            f"Spearman {figures['spearman']:.2f}, slope {figures['slope']:.2f}{texture}")
 
 
 def _interval_figures(photos: list[TonePhoto], records: dict, reference: np.ndarray) -> dict:
