@@ -18,10 +18,9 @@ from contextlib import nullcontext
 
 import torch
 
-from deface.fit import pipeline, presets, stage3
+from deface.fit import pipeline, presets, stage2, stage3
 from deface.fit.config import override
 from deface.fit.log import FitLog
-from deface.fit.stage2 import _stage2_loss
 from deface.fit.texels import frame_views
 from deface.io.images import load_image
 from deface.paths import shared_dir
@@ -47,7 +46,7 @@ def main() -> None:
     log = FitLog(quiet=True)
     target = pipeline.detect_target([load_image(args.photo)], config, str(args.photo), False)
     context, _ = pipeline.prepare(target, config, log=log)
-    _stage2_loss(context, True, True).backward()  # shadow transfer and caches
+    stage2.objective(context, True, True).backward()  # shadow transfer and caches
     step = _stage2_step(context) if args.stage == 2 else _stage3_step(context, args.reference_terms)
     walls, cpus = [], []
     for _ in range(args.repeats):
@@ -62,7 +61,7 @@ def main() -> None:
 
 
 def _stage2_step(context):
-    return lambda: _stage2_loss(context, True, False).backward()
+    return lambda: stage2.objective(context, True, False).backward()
 
 
 def _stage3_step(context, reference_terms: bool = False):

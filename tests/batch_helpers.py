@@ -3,6 +3,7 @@
 ``task``/``warm``: tasks for the worker-pool tests, top-level functions that a spawned worker imports by name.
 A job is (name, action, folder): "ok" returns the worker's pid, "sleep" waits for a file, "die-once" kills
 its own process (SIGKILL) the first time and succeeds the second, "die" always kills it.
+``recorded``: the work of a recorded task (deface/batch/recorded.py): its value and the worker's pid, or a failure.
 ``deface``/``wait_for_lock``/``arrays``: run the real command and watch or read its outputs.
 """
 
@@ -37,6 +38,12 @@ def task(job, report):
 
 def warm(folder):
     (Path(folder) / f"warm.{os.getpid()}").touch()
+
+
+def recorded(value, fail=False):
+    if fail:
+        raise ValueError(f"task {value} fails")
+    return {"value": value, "pid": os.getpid()}
 
 
 def run_deface(*arguments, **popen) -> subprocess.Popen:

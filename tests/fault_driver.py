@@ -36,7 +36,7 @@ def main() -> None:
         return SimpleNamespace(frames=len(frames), kept=(0,),
                                skin_tone=lambda: {"texture_ita": 40.0, "ita_interval": [30.0, 50.0]})
 
-    def slow_write(result, folder, record):
+    def slow_write(result, folder, record, page=None):
         with staged_directory(folder) as staging:
             (staging / "params.json").write_text(f'{{"frames": {result.frames}}}\n')
             _pause(mode, "write", float(seconds))

@@ -8,6 +8,7 @@ end-to-end tests run real tiny fits (64 px, a few dozen steps).
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -34,7 +35,8 @@ from deface.batch.record import (
     summarise,
     tone_text,
 )
-from deface.batch.resume import plan_batch, settings_differences
+from deface.batch.recorded import RecordedTask, TaskFailed, run_recorded
+from deface.batch.resume import config_record, finished_record, plan_batch, settings_differences
 from deface.cli.main import app
 from deface.export.files import write_json
 from deface.fit import presets
@@ -258,6 +260,37 @@ def test_pool_workers_run_one_job_at_a_time_and_each_warms_once(tmp_path):
     pids = {result[1] for _, result, _ in listener.of("finished")}
     assert len(listener.of("finished")) == 6 and len(pids) <= 2
     assert {p.name.split(".")[1] for p in tmp_path.glob("warm.*")} == {str(pid) for pid in pids}
+
+
+def _recorded_tasks(folder: Path, config, fail=()):
+    return [RecordedTask(f"t{i}", folder / f"t{i}" / "record.json", config,
+                         functools.partial(batch_helpers.recorded, i, i in fail)) for i in range(4)]
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_recorded_tasks_run_once_per_configuration_and_report_in_order(tmp_path, jobs):
+    config = override(presets.get("fast"), model="none")  # the workers' warm-up fails at once: only a head start
+    seen = []
+    records = run_recorded(_recorded_tasks(tmp_path, config), jobs, on_record=lambda i, r: seen.append(i))
+    assert [r["value"] for r in records] == [0, 1, 2, 3] and seen == [0, 1, 2, 3]
+    pids = {r["pid"] for r in records}
+    assert pids == {os.getpid()} if jobs == 1 else len(pids) <= 2 and os.getpid() not in pids
+    assert json.loads((tmp_path / "t2" / "record.json").read_text()) == records[2]
+    assert records[2]["config"] == config_record(config)
+    # A rerun reads the records back; a record made with another configuration is redone.
+    stale = tmp_path / "t1" / "record.json"
+    stale.write_text(json.dumps({**records[1], "value": -1, "config": config_record(override(config, seed=9))}))
+    again = run_recorded(_recorded_tasks(tmp_path, config), jobs)
+    assert [r["value"] for r in again] == [0, 1, 2, 3] and again[2:] == records[2:]
+    assert again[1]["pid"] == os.getpid()  # the one task left runs in this process, whatever ``jobs``
+
+
+def test_a_failed_recorded_task_fails_the_run_after_the_others(tmp_path):
+    config = override(presets.get("fast"), model="none")
+    with pytest.raises(TaskFailed, match="(?s)t1 failed: .*ValueError: task 1 fails"):
+        run_recorded(_recorded_tasks(tmp_path, config, fail={1}), 2)
+    assert [finished_record(tmp_path / f"t{i}" / "record.json", config) is not None for i in range(4)] == \
+        [True, False, True, True]
 
 
 def test_pool_stops_its_workers_when_the_parent_is_interrupted(tmp_path):

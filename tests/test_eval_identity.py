@@ -9,7 +9,8 @@ import pytest
 from PIL import Image
 from skimage.filters import gaussian
 
-from deface.eval.benchmark import VARIANTS, config_json, report_markdown, variant_config
+from deface.batch.resume import config_record
+from deface.eval.benchmark import VARIANTS, report_markdown, variant_config
 from deface.eval.identity import SAME_PERSON_DISTANCE, IdentityScorer, identity_scores
 from deface.eval.report import PairScores, ReportRow, write_index_html, write_metrics_json
 
@@ -121,7 +122,7 @@ def test_benchmark_table_has_an_id_column_with_a_dash_when_missing(tmp_path):
         write_metrics_json(out / name / "metrics.json", name, [PairScores("one", _scores(30), _scores(25, distance))])
         (out / name / "timing.json").write_text(json.dumps({"seconds_per_fit": [12.0]}))
         # The per-pair cache records the configuration; the report only shows rows fitted with the current one.
-        config = config_json(variant_config(VARIANTS[name], "smoke"))
+        config = config_record(variant_config(VARIANTS[name], "smoke"))
         (out / name / "one").mkdir()
         (out / name / "one" / "scores.json").write_text(json.dumps({"config": config}))
     text = report_markdown(out, tmp_path / "pairs", "smoke", "deface bench run ...")

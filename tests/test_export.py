@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from deface.export.files import staged_directory, to_uint8
+from deface.export.files import staged_directory
 from deface.export.mesh import write_glb, write_obj
+from deface.io.images import to_uint8
 
 # A unit quad with a UV seam: vertex 0 carries two UVs.
 VERTICES = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)

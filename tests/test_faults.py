@@ -311,14 +311,14 @@ def test_guard_fails_the_input_when_nan_repeats():
 
 def test_nan_in_stage2_loss_is_recovered_and_recorded(tiny_fit, monkeypatch):
     face, config = tiny_fit
-    original, calls = stage2._stage2_loss, []
+    original, calls = stage2.objective, []
 
     def poisoned(*args, **kwargs):
         calls.append(1)
         loss = original(*args, **kwargs)
         return loss * float("nan") if len(calls) == 3 else loss
 
-    monkeypatch.setattr(stage2, "_stage2_loss", poisoned)
+    monkeypatch.setattr(stage2, "objective", poisoned)
     log = FitLog(quiet=True)
     result = fit_target(FitTarget([face.image_srgb], [face.landmarks], 1.0), config, log=log)
     assert all(torch.isfinite(t).all() for t in (result.pose.identity, result.lights.sh, result.albedo.coefficients,

@@ -18,7 +18,6 @@ import torch
 from PIL import Image
 
 from deface.eval.synthetic import directional_sh, true_landmarks
-from deface.export.files import to_uint8
 from deface.export.load import load_fit
 from deface.export.outputs import write_fit
 from deface.fit import presets
@@ -27,7 +26,7 @@ from deface.fit.framing import Framing, choose_framing, texture_size_for
 from deface.fit.log import FitLog
 from deface.fit.pipeline import fit_target
 from deface.fit.target import FitTarget, frame_target
-from deface.io.images import linear_to_srgb, resize_max
+from deface.io.images import linear_to_srgb, resize_max, to_uint8
 from deface.landmarks.detect import Landmarks
 from deface.models import load_face_model
 from deface.render import kernels

@@ -13,11 +13,10 @@ import torch
 from skimage.color import lab2rgb
 
 from deface.eval.synthetic import directional_sh, true_landmarks
-from deface.fit import presets
+from deface.fit import presets, stage2
 from deface.fit.config import override
 from deface.fit.log import FitLog
 from deface.fit.pipeline import run_stages
-from deface.fit.stage2 import _stage2_loss
 from deface.fit.target import FitTarget
 from deface.io.images import linear_to_srgb
 from deface.losses.illuminant import front_directions, peak_white, white_response
@@ -128,7 +127,7 @@ def test_prior_cost_is_flat_over_tone(neutral_fits):
     for ita in (-30.0, 0.0, 20.0, 45.0, 70.0):
         with torch.no_grad():
             context.scene.tone.fill_(ita)
-            costs.append(float(_stage2_loss(context, before_ace=False, refresh_shadows=False)))
+            costs.append(float(stage2.objective(context, before_ace=False, refresh_shadows=False)))
     assert np.ptp(costs) <= 1e-6 * max(abs(c) for c in costs)
 
 

@@ -19,7 +19,6 @@ from typer.testing import CliRunner
 from deface.cli.main import app
 from deface.eval.benchmark import SCHEDULES
 from deface.eval.synthetic import make_shadowed_face
-from deface.export.files import to_uint8
 from deface.export.load import FitFormatError, load_fit
 from deface.export.outputs import write_fit
 from deface.fit import presets
@@ -27,11 +26,13 @@ from deface.fit.config import override
 from deface.fit.log import FitLog
 from deface.fit.pipeline import run_stages
 from deface.fit.target import FitTarget
+from deface.io.images import to_uint8
 from deface.models import load_face_model
 from deface.relight import lights as light_sources
 from deface.relight.transfer import transfer_renders
 from deface.relight.turntable import turntable_frames
 from deface.render.sh import sh_basis
+from deface.report.html import write_index, write_report
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +45,7 @@ def state(shared):
 @pytest.fixture(scope="module")
 def written(state, tmp_path_factory):
     folder = tmp_path_factory.mktemp("fit") / "face"
-    write_fit(state.output(), folder, {"path": "synthetic", "kind": "image", "frames": [0]})
+    write_fit(state.output(), folder, {"path": "synthetic", "kind": "image", "frames": [0]}, page=write_report)
     return folder
 
 
@@ -267,8 +268,6 @@ def test_report_command_rewrites_the_report_of_a_loaded_fit(written, tmp_path):
 
 def test_batch_index_links_each_report(photos, tmp_path, written):
     import shutil
-
-    from deface.report.html import write_index
 
     shutil.copytree(written, tmp_path / "a")
     index = write_index(tmp_path, ["a", "missing"]).read_text()

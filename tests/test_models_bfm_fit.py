@@ -21,6 +21,7 @@ from typer.testing import CliRunner
 from deface.cli.main import app
 from deface.landmarks import correspondence as C
 from deface.models.bfm import BFM_FILE, BFMConfig, load_bfm, read_named_landmarks
+from deface.models.landmark_names import named_anchor_ids
 from deface.paths import ModelFileError
 
 runner = CliRunner()
@@ -79,7 +80,7 @@ def test_landmark_json_in_other_string_storages(tmp_path, storage):
 def test_correspondence_built_from_the_metadata_alone(bfm, corr, ict):
     """Anchors land on the named points; the rest agrees with ICT's own iBUG-68-anchored correspondence."""
     position = _positions(bfm, corr)
-    rows, mp_ids = C.named_anchor_ids(bfm.landmark_names)
+    rows, mp_ids = named_anchor_ids(bfm.landmark_names)
     assert len(rows) == 21  # the ear and the inner lip are ignored
     for row, mediapipe in zip(rows, mp_ids, strict=True):
         if mediapipe in position:

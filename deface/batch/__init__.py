@@ -8,4 +8,5 @@ pool.py      spawned worker processes, one job at a time each; a dead worker fai
 ray_engine.py  the same task as one Ray task per input (optional extra `deface[ray]`)
 display.py   the live progress display / one line per input
 run.py       the batch: plan, engine, lines, records, signals
+recorded.py  tasks that record their result with their configuration (the benchmarks' fits): resumed, on the pool
 """

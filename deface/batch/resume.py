@@ -1,6 +1,10 @@
 """What a (re)run of a batch does with each input: fit it, skip it (finished), or leave it (``--retry-failed``
 redoes only the inputs whose last record is a failure); and the check that finished outputs were made with
 the same settings, so a resumed batch never silently mixes presets or configs.
+
+The benchmarks' fits (:mod:`deface.batch.recorded`) resume by the same rule with one difference: a task whose
+record was made with another configuration is redone (a benchmark measures the current settings), where a
+batch refuses to mix them.
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ from pathlib import Path
 
 from deface.batch.record import latest_states, read_records
 from deface.batch.task import finished_params
-from deface.fit.config import FitConfig, differences, from_dict, supports_free_tone
+from deface.fit.config import FitConfig, differences, from_dict, supports_free_tone, to_dict
 from deface.io.inputs import InputItem
 
 # Config fields that do not change what is fitted: torch threads (a batch worker runs with 1).
@@ -64,6 +68,20 @@ def plan_batch(items: list[InputItem], output: Path, config: FitConfig, overwrit
             f"{'; '.join(differences[:4])}); rerun with the same settings, use --overwrite to redo them, "
             f"or write to another -o")
     return Plan(todo, finished, left)
+
+
+def config_record(config: FitConfig) -> dict:
+    """The configuration as a record stores it and reads it back from JSON (tuples become lists)."""
+    return json.loads(json.dumps(to_dict(config)))
+
+
+def finished_record(path: Path, config: FitConfig) -> dict | None:
+    """The JSON record at ``path`` when its task finished with this very configuration (its ``config`` is
+    :func:`config_record` of ``config``), else None: the task is (re)done."""
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    return record if record.get("config") == config_record(config) else None
 
 
 def check_distinct_outputs(items: list[InputItem]) -> None:

@@ -23,6 +23,7 @@ from deface.io.inputs import InputItem
 from deface.io.video import read_spread_frames
 from deface.landmarks.detect import NoFaceError
 from deface.paths import ModelFileError
+from deface.report.html import write_report
 
 # Failures of one input that are explained by their message (OSError: disk, permissions, missing files).
 EXPECTED_ERRORS = (InputError, NoFaceError, ModelFileError, OutputError, NonFiniteError, ValueError, OSError)
@@ -110,7 +111,7 @@ def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
     if item.kind == "image":  # a photo above LOAD_MAX_SIDE was decoded smaller: params.json's camera says both
         record["file_size"] = list(image_size(item.path))
     try:
-        write_fit(result, folder, record)
+        write_fit(result, folder, record, page=write_report)
     except OSError as error:
         raise OutputError(f"{folder}: cannot write ({error.strerror or one_line(error)}); what was there "
                           "before is unchanged") from error

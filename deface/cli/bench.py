@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated
 
@@ -96,19 +99,13 @@ def run_command(
         "BENCHMARKS.md"),
 ) -> None:
     """Fit every variant on every pair (texture-swap protocol), then rewrite the tables in REPORT."""
-    from rich.console import Console
+    from deface.eval.benchmark import VARIANTS, report_markdown, run_benchmark, update_benchmarks_md
 
-    from deface.eval.benchmark import SCHEDULES, VARIANTS, report_markdown, run_benchmark, update_benchmarks_md
-
-    console = Console(soft_wrap=True)
+    console = _console()
     names = list(VARIANTS) if variants == "all" else [v.strip() for v in variants.split(",") if v.strip()]
-    if schedule not in SCHEDULES:
-        raise typer.BadParameter(f"unknown schedule {schedule!r}; choose {', '.join(SCHEDULES)}")
-    try:
+    _checked_schedule(schedule)
+    with _usage_errors(console):
         run_benchmark(pairs, output, names, schedule, jobs, limit, log=console.print)
-    except ValueError as error:
-        console.print(f"[red]error:[/red] {error}")
-        raise typer.Exit(2) from None
     command = f"deface bench run {pairs} -o {output} --variants {variants} --schedule {schedule} --jobs {jobs}"
     command += f" --limit {limit}" if limit else ""
     update_benchmarks_md(report, report_markdown(output, pairs, schedule, command, limit))
@@ -146,52 +143,32 @@ def skin_tone_command(
 ) -> None:
     """ITA of each recovered albedo against the photo's (or the true) skin tone; report.md, results.json and
     contact_sheet.png in OUTPUT."""
-    import json
-
-    from rich.console import Console
-
-    from deface.eval.benchmark import SCHEDULES, update_benchmarks_md
     from deface.eval.tone_benchmark import (
-        PROXY,
         contact_sheet,
         read_manifest,
         report_markdown,
         run_tone_benchmark,
         summary,
+        summary_line,
         with_proxy,
     )
     from deface.fit import presets
 
-    console = Console(soft_wrap=True)
-    if schedule not in SCHEDULES:
-        raise typer.BadParameter(f"unknown schedule {schedule!r}; choose {', '.join(SCHEDULES)}")
-    try:
+    console = _console()
+    steps = _checked_schedule(schedule)
+    with _usage_errors(console):
         presets.get(preset)
         photos = read_manifest(folder)
-    except ValueError as error:
-        console.print(f"[red]error:[/red] {error}")
-        raise typer.Exit(2) from None
-    records = run_tone_benchmark(folder, output, preset, baseline, SCHEDULES[schedule], jobs, models,
-                                 log=console.print)
+    records = run_tone_benchmark(folder, output, preset, baseline, steps, jobs, models, log=console.print)
     command = f"deface bench skin-tone {folder} -o {output} --preset {preset} --schedule {schedule}"
     command += "" if baseline else " --no-baseline"
-    section = report_markdown(photos, records, folder.resolve().name, command)
-    (output / "report.md").write_text(section)
     scored = with_proxy(photos, records)
-    (output / "results.json").write_text(json.dumps(
-        {v: {"summary": summary(photos, r), "photos": r} for v, r in scored.items()}, indent=1))
-    sheet = contact_sheet(folder, output, photos, list(records))
-    if report is not None:
-        update_benchmarks_md(report, section, key=f"skin-tone-{folder.resolve().name}")
-    for variant, recs in scored.items():
-        s = summary(photos, recs)
-        groups = ", ".join(f"{g} {v:.1f}" for g, v in s["group_mae"].items())
-        speckles = ", ".join(f"{g} {v:.2f}" for g, v in s["group_speckle"].items())
-        details = ", ".join(f"{g} {v:.2f}" for g, v in s["group_detail"].items())
-        texture = "" if variant == PROXY else f"; speckle {speckles}; detail {details}"
-        console.print(f"{variant}: MAE {s['mae']:.1f}, groups {groups}, bias {s['bias']:.2f}, "
-                      f"Spearman {s['spearman']:.2f}, slope {s['slope']:.2f}{texture}")
-    console.print(f"wrote {output / 'report.md'} and {sheet}")
+    summaries = {variant: summary(photos, recs) for variant, recs in scored.items()}
+    results = {variant: {"summary": summaries[variant], "photos": recs} for variant, recs in scored.items()}
+    section = report_markdown(photos, records, folder.resolve().name, command)
+    _write_set_results(console, folder, output, "skin-tone", section, results,
+                       contact_sheet(folder, output, photos, list(records)), report,
+                       [summary_line(variant, s) for variant, s in summaries.items()])
 
 
 def albedo_command(
@@ -208,53 +185,77 @@ def albedo_command(
     """Fit renders of known albedo and score each diffuse map against the truth in UV: PSNR, SSIM, colour noise,
     and per region (the set's masks) the darkness kept and the fine structure; report.md, results.json and
     contact_sheet.png in OUTPUT."""
-    import json
-
-    from rich.console import Console
-
     from deface.eval.albedo_benchmark import (
         contact_sheet,
         read_truth_set,
         report_markdown,
         run_albedo_benchmark,
         summary,
+        summary_line,
     )
-    from deface.eval.benchmark import SCHEDULES, update_benchmarks_md
     from deface.fit import presets
     from deface.fit.config import override, set_from_text
 
-    console = Console(soft_wrap=True)
-    if schedule not in SCHEDULES:
-        raise typer.BadParameter(f"unknown schedule {schedule!r}; choose {', '.join(SCHEDULES)}")
+    console = _console()
+    steps = _checked_schedule(schedule)
 
     def configured(name: str):
-        config = override(presets.get(name), **SCHEDULES[schedule])
+        config = override(presets.get(name), **steps)
         for assignment in settings or []:
             config = set_from_text(config, assignment)
         return config
 
     suffix = "+" + ",".join(settings) if settings else ""
-    try:
+    with _usage_errors(console):
         renders = read_truth_set(folder)
         variants = {f"{name}{suffix}": configured(name)
                     for name in (p.strip() for p in presets_.split(",") if p.strip())}
-    except ValueError as error:
-        console.print(f"[red]error:[/red] {error}")
-        raise typer.Exit(2) from None
     records = run_albedo_benchmark(folder, output, variants, jobs, models, log=console.print)
     command = f"deface bench albedo {folder} -o {output} --preset {presets_} --schedule {schedule}"
     command += "".join(f" --set {s}" for s in settings or [])
+    summaries = {variant: summary(recs) for variant, recs in records.items()}
+    results = {variant: {"summary": summaries[variant], "renders": recs} for variant, recs in records.items()}
     section = report_markdown(renders, records, folder.resolve().name, command)
+    _write_set_results(console, folder, output, "albedo", section, results,
+                       contact_sheet(folder, output, renders, list(records)), report,
+                       [summary_line(variant, s) for variant, s in summaries.items()])
+
+
+def _console():
+    from rich.console import Console
+
+    return Console(soft_wrap=True)
+
+
+def _checked_schedule(schedule: str) -> dict:
+    """The settings of a named schedule (deface/eval/benchmark.py ``SCHEDULES``); a usage error for another name."""
+    from deface.eval.benchmark import SCHEDULES
+
+    if schedule not in SCHEDULES:
+        raise typer.BadParameter(f"unknown schedule {schedule!r}; choose {', '.join(SCHEDULES)}")
+    return SCHEDULES[schedule]
+
+
+@contextmanager
+def _usage_errors(console) -> Iterator[None]:
+    """A ValueError (an unknown variant or preset, a set that cannot be read) is one red line and exit code 2."""
+    try:
+        yield
+    except ValueError as error:
+        console.print(f"[red]error:[/red] {error}")
+        raise typer.Exit(2) from None
+
+
+def _write_set_results(console, folder: Path, output: Path, kind: str, section: str, results: dict, sheet: Path,
+                       report: Path | None, lines: list[str]) -> None:
+    """OUTPUT/report.md and results.json of a truth or photo set's benchmark, its section ``KIND-<set>`` of REPORT
+    when given, then one line per variant and where the files are (the contact sheet is written already)."""
+    from deface.eval.benchmark import update_benchmarks_md
+
     (output / "report.md").write_text(section)
-    (output / "results.json").write_text(json.dumps(
-        {v: {"summary": summary(r), "renders": r} for v, r in records.items()}, indent=1))
-    sheet = contact_sheet(folder, output, renders, list(records))
+    (output / "results.json").write_text(json.dumps(results, indent=1))
     if report is not None:
-        update_benchmarks_md(report, section, key=f"albedo-{folder.resolve().name}")
-    for variant, recs in records.items():
-        s = summary(recs)
-        regions = ", ".join(f"{r} kept {v['darkness_kept']:.2f} fine {v['fine_structure']:.2f}"
-                            for r, v in s.items() if r != "face")
-        console.print(f"{variant}: PSNR {s['face']['psnr']:.2f} dB, SSIM {s['face']['ssim']:.3f}, colour noise "
-                      f"{s['face']['colour_noise']:.2f} ({s['face']['colour_noise_truth']:.2f}); {regions}")
+        update_benchmarks_md(report, section, key=f"{kind}-{folder.resolve().name}")
+    for line in lines:
+        console.print(line)
     console.print(f"wrote {output / 'report.md'} and {sheet}")

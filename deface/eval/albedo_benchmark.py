@@ -15,16 +15,16 @@ texels; without masks the whole shown face is the region and its own reference.
 
 from __future__ import annotations
 
-import csv
-import json
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from deface.batch.recorded import RecordedTask, run_recorded
 from deface.eval import albedo_measures as measures
-from deface.eval.benchmark import cached_scores, config_json, map_in_processes
+from deface.eval.manifest import read_manifest_rows
 from deface.fit.config import FitConfig
 
 MAX_ANGLE = 70.0
@@ -48,13 +48,7 @@ class TruthRender:
 
 def read_truth_set(folder: Path) -> list[TruthRender]:
     """The renders of a truth set; one-line errors for a missing manifest, image or albedo."""
-    manifest = folder / "MANIFEST.tsv"
-    if not manifest.is_file():
-        raise ValueError(f"{folder}: no MANIFEST.tsv (a column 'file'; see deface/eval/albedo_benchmark.py)")
-    with manifest.open(newline="") as handle:
-        rows = list(csv.DictReader(handle, delimiter="\t"))
-    if not rows or "file" not in rows[0]:
-        raise ValueError(f"{manifest}: no rows, or no column 'file'")
+    manifest, rows = read_manifest_rows(folder, ("file",), "a column 'file'; see deface/eval/albedo_benchmark.py")
     renders = [TruthRender(row["file"], _albedo_name(row), _light_name(row)) for row in rows]
     for render in renders:
         for path in (folder / "images" / render.file, folder / "albedo" / render.albedo):
@@ -137,34 +131,21 @@ def similarity_aligned(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     return scale * a @ rotation + target_mean
 
 
-def _fit_render(task: tuple) -> dict:
-    """Worker: fit one render, write its outputs and scores.json (cached by configuration)."""
-    folder, render, variant, config, out_dir, models_dir = task
-    result_dir = Path(out_dir) / variant / render.stem
-    cached = cached_scores(result_dir / "scores.json", config)
-    if cached is not None:
-        return cached
-    record = measure_render(Path(folder), render, config, result_dir, models_dir)
-    record["config"] = config_json(config)
-    (result_dir / "scores.json").write_text(json.dumps(record, indent=1))
-    return record
-
-
 def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_dir: Path, models_dir=None) -> dict:
     """Fit a render, write the fit (and its albedo under a neutral light) to ``result_dir``, score its map."""
-    from deface.export.files import save_png
     from deface.export.outputs import write_fit
     from deface.fit.log import FitLog
     from deface.fit.pipeline import fit
-    from deface.io.images import load_image, srgb_to_linear
+    from deface.io.images import load_image, save_png, srgb_to_linear
     from deface.models.ict_build import read_obj
     from deface.render.sh import white_light
+    from deface.report.html import write_report
 
     started = time.perf_counter()
     path = folder / "images" / render.file
     result = fit([load_image(path)], config, models_dir=models_dir, source=str(path), log=FitLog(quiet=True))
     seconds = time.perf_counter() - started
-    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]})
+    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]}, page=write_report)
     neutral = result.render(lights=white_light(config.lights.bands))[0].face
     save_png(result_dir / "neutral.png", neutral.clamp(0, 1).numpy())
     mesh_path = folder / "mesh.obj"
@@ -182,19 +163,26 @@ def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_
 
 def run_albedo_benchmark(folder: Path, out_dir: Path, variants: dict[str, FitConfig], jobs: int = 2,
                          models_dir=None, log=print) -> dict:
-    """Fit every render with every variant {name: config}; returns {variant: {stem: record}}."""
+    """Fit every render with every variant {name: config}, each recorded in OUT/<variant>/<render>/scores.json with
+    its configuration (not refitted while it holds); returns {variant: {stem: record}}."""
     renders = read_truth_set(folder)
-    tasks = [(str(folder), r, name, config, str(out_dir), models_dir) for name, config in variants.items()
-             for r in renders]
-    records: dict = {name: {} for name in variants}
-    for task, record in zip(tasks, map_in_processes(_fit_render, tasks, jobs), strict=True):
-        render, name = task[1], task[2]
-        records[name][render.stem] = record
+    runs = [(name, render) for name in variants for render in renders]
+    tasks = []
+    for name, render in runs:
+        config, result_dir = variants[name], Path(out_dir) / name / render.stem
+        tasks.append(RecordedTask(f"{name} / {render.stem}", result_dir / "scores.json", config,
+                                  partial(measure_render, Path(folder), render, config, result_dir, models_dir)))
+
+    def logged(index: int, record: dict) -> None:
         face = record["scores"][FACE]
-        log(f"{name} / {render.stem}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}"
+        log(f"{tasks[index].name}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}"
             + "".join(f", {region} kept {s['darkness_kept']:.2f} fine {s['fine_structure']:.2f}"
                       for region, s in record["scores"].items() if region != FACE)
             + f" ({record['seconds']:.0f} s)")
+
+    records: dict = {name: {} for name in variants}
+    for (name, render), record in zip(runs, run_recorded(tasks, jobs, models_dir, logged), strict=True):
+        records[name][render.stem] = record
     return records
 
 
@@ -206,6 +194,15 @@ def summary(records: dict) -> dict:
             for measure, value in values.items():
                 table.setdefault(region, {}).setdefault(measure, []).append(value)
     return {region: {m: _mean(v) for m, v in values.items()} for region, values in table.items()}
+
+
+def summary_line(variant: str, figures: dict) -> str:
+    """One line of a variant's :func:`summary` for the console."""
+    face = figures[FACE]
+    regions = ", ".join(f"{r} kept {v['darkness_kept']:.2f} fine {v['fine_structure']:.2f}"
+                        for r, v in figures.items() if r != FACE)
+    return (f"{variant}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}, colour noise "
+            f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f}); {regions}")
 
 
 def _mean(values: list[float]) -> float:

@@ -1,6 +1,7 @@
 """The texture-recovery benchmark: every baseline and ablation of the paper through one harness
-(:func:`deface.eval.protocol.evaluate_pair`), in parallel processes, cached per pair, and written as
-tables shaped like the paper's into BENCHMARKS.md.
+(:func:`deface.eval.protocol.evaluate_pair`), run as the batch's recorded tasks (:mod:`deface.batch.recorded`:
+the batch's worker pool, each pair's scores recorded with the configuration and not refitted while it holds),
+and written as tables shaped like the paper's into BENCHMARKS.md.
 
 Variants are data (:data:`VARIANTS`); rows that coincide with another variant (e.g. "+f +g" is the
 default preset itself) point to it instead of being fitted twice.
@@ -9,18 +10,19 @@ default preset itself) point to it instead of being fitted twice.
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
 import platform
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
+from deface.batch.recorded import RecordedTask, run_recorded
+from deface.batch.resume import finished_record
 from deface.eval.pairs import Pair, read_pairs
 from deface.eval.report import PairScores, write_metrics_json
 from deface.fit import presets
-from deface.fit.config import FitConfig, override, to_dict
+from deface.fit.config import FitConfig, override
 
 
 @dataclass(frozen=True)
@@ -88,59 +90,41 @@ def variant_config(variant: Variant, schedule: str) -> FitConfig:
     return override(config, **SCHEDULES[schedule], preset=f"{config.preset}:{variant.name}")
 
 
-def _run_pair(task: tuple) -> tuple[str, str, float]:
-    """Worker: one variant on one pair; cached in OUT/<variant>/<pair>/scores.json with its configuration."""
+def pair_tasks(pairs: list[Pair], out_dir: Path, variants: list[str], schedule: str,
+               models_dir=None) -> list[RecordedTask]:
+    """One task per variant and pair, recorded in OUT/<variant>/<pair>/scores.json with its configuration."""
+    tasks = []
+    for name in variants:
+        config = variant_config(VARIANTS[name], schedule)
+        for pair in pairs:
+            folder = Path(out_dir) / name / pair.name
+            tasks.append(RecordedTask(f"{name} / {pair.name}", folder / "scores.json", config,
+                                      partial(_pair_scores, pair, config, folder, models_dir)))
+    return tasks
+
+
+def _pair_scores(pair: Pair, config: FitConfig, folder: Path, models_dir) -> dict:
+    """One variant on one pair: the scores.json fields (its images are written into ``folder``)."""
     from deface.eval.protocol import evaluate_pair
 
-    variant_name, schedule, pair, out_dir, models_dir = task
-    folder = Path(out_dir) / variant_name / pair.name
-    cached = folder / "scores.json"
-    config = variant_config(VARIANTS[variant_name], schedule)
-    scores = cached_scores(cached, config)
-    if scores is not None:
-        return variant_name, pair.name, scores["seconds_per_fit"]
     outcome = evaluate_pair(pair, config, folder, models_dir)
-    cached.write_text(json.dumps({"source": outcome.scores.source, "target": outcome.scores.target,
-                                  "seconds_per_fit": outcome.seconds_per_fit, "albedo_ita": outcome.albedo_ita,
-                                  "uv": outcome.uv, "config": config_json(config)}, indent=1))
-    return variant_name, pair.name, outcome.seconds_per_fit
-
-
-def config_json(config: FitConfig) -> dict:
-    """The configuration as it reads back from JSON (tuples become lists), for cache comparison."""
-    return json.loads(json.dumps(to_dict(config)))
-
-
-def cached_scores(path: Path, config: FitConfig) -> dict | None:
-    """A pair's cached scores if they were fitted with this very configuration (a changed default refits)."""
-    if not path.exists():
-        return None
-    scores = json.loads(path.read_text())
-    return scores if scores.get("config") == config_json(config) else None
+    return {"source": outcome.scores.source, "target": outcome.scores.target,
+            "seconds_per_fit": outcome.seconds_per_fit, "albedo_ita": outcome.albedo_ita, "uv": outcome.uv}
 
 
 def run_benchmark(pairs_dir: Path, out_dir: Path, variants: list[str], schedule: str = "quick",
                   jobs: int = 2, limit: int | None = None, models_dir=None, log=print) -> None:
     """Evaluate ``variants`` (in this priority order) on the first ``limit`` pairs (all by default),
-    ``jobs`` fits at a time."""
+    ``jobs`` fits at a time; pairs already fitted with a variant's configuration are not fitted again."""
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         raise ValueError(f"unknown variant(s) {unknown}; known: {', '.join(VARIANTS)}")
     pairs = read_pairs(pairs_dir)[:limit]
-    tasks = [(v, schedule, pair, str(out_dir), models_dir) for v in variants for pair in pairs]
-    for name, pair_name, seconds in map_in_processes(_run_pair, tasks, jobs):
-        log(f"{name} / {pair_name}: {seconds:.0f} s per fit")
+    tasks = pair_tasks(pairs, out_dir, variants, schedule, models_dir)
+    run_recorded(tasks, jobs, models_dir,
+                 lambda index, scores: log(f"{tasks[index].name}: {scores['seconds_per_fit']:.0f} s per fit"))
     for name in variants:
         _write_variant_metrics(out_dir, name, pairs)
-
-
-def map_in_processes(function, tasks: list, jobs: int):
-    """In order; in ``jobs`` fresh processes (spawned: forking after torch/MediaPipe start is unsafe)."""
-    if jobs <= 1:
-        yield from map(function, tasks)
-        return
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        yield from pool.map(function, tasks)
 
 
 def _write_variant_metrics(out_dir: Path, name: str, pairs: list[Pair]) -> None:
@@ -174,7 +158,7 @@ def _mean_uv(uv: list[dict]) -> dict:
 def _fitted_now(out_dir: Path, name: str, schedule: str, pairs: list[Pair]) -> bool:
     """Whether every pair's cached scores were fitted with the variant's current configuration."""
     config = variant_config(VARIANTS[name], schedule)
-    return all(cached_scores(out_dir / name / pair.name / "scores.json", config) is not None for pair in pairs)
+    return all(finished_record(out_dir / name / pair.name / "scores.json", config) is not None for pair in pairs)
 
 
 def _row(out_dir: Path, label: str, name: str, schedule: str, pairs: list[Pair]) -> str:

@@ -20,12 +20,11 @@ from deface.eval.metrics import composite, mean_scores, score_images
 from deface.eval.pairs import Pair
 from deface.eval.report import PairScores, ReportRow
 from deface.eval.uv_measure import SEEN, both_seen, detail_ratio, edge_fringe, speckle, uv_consistency
-from deface.export.files import save_png
 from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
 from deface.fit.output import FitOutput
 from deface.fit.pipeline import fit
-from deface.io.images import linear_to_srgb, load_image
+from deface.io.images import linear_to_srgb, load_image, save_png
 from deface.models.ita import texture_ita
 from deface.relight.transfer import transfer_renders
 from deface.texture.confidence import unwrap

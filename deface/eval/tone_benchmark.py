@@ -23,16 +23,17 @@ proxy is the proxy's own.
 
 from __future__ import annotations
 
-import csv
 import json
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 from scipy import stats
 
-from deface.eval.benchmark import cached_scores, config_json, map_in_processes
+from deface.batch.recorded import RecordedTask, run_recorded
+from deface.eval.manifest import read_manifest_rows
 from deface.eval.sheets import image_grid
 from deface.fit import presets
 from deface.fit.config import FitConfig, override, set_from_text
@@ -57,14 +58,7 @@ class TonePhoto:
 
 def read_manifest(folder: Path) -> list[TonePhoto]:
     """The photos of a skin-tone folder; one-line errors for a missing manifest, column or image."""
-    manifest = folder / "MANIFEST.tsv"
-    if not manifest.is_file():
-        raise ValueError(f"{folder}: no MANIFEST.tsv (columns file, tone_group[, gt_ita])")
-    with manifest.open(newline="") as handle:
-        rows = list(csv.DictReader(handle, delimiter="\t"))
-    missing = {"file", "tone_group"} - set(rows[0] if rows else {})
-    if missing:
-        raise ValueError(f"{manifest}: missing column(s) {', '.join(sorted(missing))}")
+    _, rows = read_manifest_rows(folder, ("file", "tone_group"), "columns file, tone_group[, gt_ita]")
     photos = [TonePhoto(r["file"], r["tone_group"], float(r["gt_ita"]) if r.get("gt_ita") else None,
                         tuple(s.strip() for s in (r.get("settings") or "").split(";") if s.strip())) for r in rows]
     absent = [p.file for p in photos if not (folder / "images" / p.file).is_file()]
@@ -77,39 +71,32 @@ def variant_config(preset: str, schedule: dict) -> FitConfig:
     return override(presets.get(preset), **schedule)
 
 
-def _fit_photo(task: tuple) -> dict:
-    """Worker: fit one photo with one variant, write its outputs and tone.json; cached by configuration."""
-    folder, photo, preset, schedule, out_dir, models_dir = task
-    result_dir = Path(out_dir) / preset / photo.stem
+def photo_config(photo: TonePhoto, preset: str, schedule: dict) -> FitConfig:
+    """A variant's configuration for one photo: the photo's own settings (its card) are the method's; NextFace has
+    no white level."""
     config = variant_config(preset, schedule)
-    if preset != BASELINE:  # the photo's own settings (its card) are the method's; NextFace has no white level
+    if preset != BASELINE:
         for assignment in photo.settings:
             config = set_from_text(config, assignment)
-    cached = cached_scores(result_dir / "tone.json", config)
-    if cached is not None:
-        return cached
-    record = measure_photo(Path(folder) / "images" / photo.file, config, result_dir, models_dir)
-    record["config"] = config_json(config)
-    (result_dir / "tone.json").write_text(json.dumps(record, indent=1))
-    return record
+    return config
 
 
 def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=None) -> dict:
     """Fit ``path``, write the fit and a neutral-light render into ``result_dir``, return the tone record."""
 
     from deface.eval.protocol import fit_detail
-    from deface.export.files import save_png
     from deface.export.outputs import write_fit
     from deface.fit.log import FitLog
     from deface.fit.pipeline import fit
-    from deface.io.images import linear_to_srgb, load_image
+    from deface.io.images import linear_to_srgb, load_image, save_png
     from deface.models.ita import photo_tone, pixel_uvs, texture_ita
     from deface.render.sh import white_light
+    from deface.report.html import write_report
 
     started = time.perf_counter()
     result = fit([load_image(path)], config, models_dir=models_dir, source=str(path), log=FitLog(quiet=True))
     seconds = time.perf_counter() - started
-    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]})
+    write_fit(result, result_dir, {"path": str(path), "kind": "image", "frames": [0]}, page=write_report)
     neutral = result.render(lights=white_light(config.lights.bands))[0].face
     save_png(result_dir / "neutral.png", neutral.clamp(0, 1).numpy())
     frame = result.frames[0]
@@ -128,16 +115,26 @@ def measure_photo(path: Path, config: FitConfig, result_dir: Path, models_dir=No
 
 def run_tone_benchmark(folder: Path, out_dir: Path, preset: str, baseline: bool, schedule: dict,
                        jobs: int = 2, models_dir=None, log=print) -> dict:
-    """Fit every photo with ``preset`` (and NextFace when ``baseline``); returns {variant: {stem: record}}."""
+    """Fit every photo with ``preset`` (and NextFace when ``baseline``), each recorded in OUT/<variant>/<photo>/
+    tone.json with its configuration (not refitted while it holds); returns {variant: {stem: record}}."""
     photos = read_manifest(folder)
     variants = [preset] + ([BASELINE] if baseline and preset != BASELINE else [])
-    tasks = [(str(folder), p, v, schedule, str(out_dir), models_dir) for v in variants for p in photos]
-    records: dict = {v: {} for v in variants}
-    for task, record in zip(tasks, map_in_processes(_fit_photo, tasks, jobs), strict=True):
-        variant, photo = task[2], task[1]
-        records[variant][photo.stem] = record
-        log(f"{variant} / {photo.stem}: albedo ITA {record['albedo_ita']:.1f}, reference "
+    runs = [(v, p) for v in variants for p in photos]
+    tasks = []
+    for variant, photo in runs:
+        config, result_dir = photo_config(photo, variant, schedule), Path(out_dir) / variant / photo.stem
+        tasks.append(RecordedTask(f"{variant} / {photo.stem}", result_dir / "tone.json", config,
+                                  partial(measure_photo, Path(folder) / "images" / photo.file, config, result_dir,
+                                          models_dir)))
+
+    def logged(index: int, record: dict) -> None:
+        photo = runs[index][1]
+        log(f"{tasks[index].name}: albedo ITA {record['albedo_ita']:.1f}, reference "
             f"{reference_ita(photo, record):.1f} ({record['seconds']:.0f} s)")
+
+    records: dict = {v: {} for v in variants}
+    for (variant, photo), record in zip(runs, run_recorded(tasks, jobs, models_dir, logged), strict=True):
+        records[variant][photo.stem] = record
     return records
 
 
@@ -175,6 +172,16 @@ def summary(photos: list[TonePhoto], records: dict) -> dict:
             "group_detail": group_detail, **_interval_figures(photos, records, reference),
             "bias": float(np.std(list(group_mae.values()))), "spearman": rho, "slope": slope,
             "mean_signed": float(np.nanmean(albedo - reference)), "photos": int(valid.sum())}
+
+
+def summary_line(variant: str, figures: dict) -> str:
+    """One line of a variant's :func:`summary` for the console."""
+    groups = ", ".join(f"{g} {v:.1f}" for g, v in figures["group_mae"].items())
+    speckles = ", ".join(f"{g} {v:.2f}" for g, v in figures["group_speckle"].items())
+    details = ", ".join(f"{g} {v:.2f}" for g, v in figures["group_detail"].items())
+    texture = "" if variant == PROXY else f"; speckle {speckles}; detail {details}"
+    return (f"{variant}: MAE {figures['mae']:.1f}, groups {groups}, bias {figures['bias']:.2f}, "
+            f"Spearman {figures['spearman']:.2f}, slope {figures['slope']:.2f}{texture}")
 
 
 def _interval_figures(photos: list[TonePhoto], records: dict, reference: np.ndarray) -> dict:

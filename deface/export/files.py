@@ -1,7 +1,8 @@
-"""Writing outputs safely: images, OBJ/MTL, params, all staged in a temporary folder and moved into place
-only when complete, so an interrupted or failed run never leaves a half-written result or destroys an
-earlier one. One process at a time writes an output folder (:func:`claimed_output`, a lock released by
-the kernel even on ``kill -9``), and the holder of the lock removes what a killed run left behind.
+"""Writing outputs safely: a fit's files (PNGs by :func:`deface.io.images.save_png`, OBJ/MTL, params) are staged
+in a temporary folder and moved into place only when complete, so an interrupted or failed run never leaves a
+half-written result or destroys an earlier one. One process at a time writes an output folder
+(:func:`claimed_output`, a lock released by the kernel even on ``kill -9``), and the holder of the lock removes
+what a killed run left behind.
 """
 
 from __future__ import annotations
@@ -18,9 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
-SRGB_GAMMA = 2.2  # NextFace's linearisation; see deface.io
 STAGING_SUFFIX = ".partial"
 _MKDTEMP_NAME = re.compile(r"[a-z0-9_]+")  # the random part tempfile.mkdtemp puts in a name (no dots)
 
@@ -31,23 +30,6 @@ class OutputBusy(RuntimeError):
 
 class OutputError(OSError):
     """An output folder cannot be written (permissions, not a folder, disk full); one line."""
-
-
-def to_uint8(image: np.ndarray, srgb: bool) -> np.ndarray:
-    """[H, W] or [H, W, C] linear float -> uint8, gamma-encoded when ``srgb``."""
-    image = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float32)), 0.0, 1.0)
-    if srgb:
-        image = image ** (1.0 / SRGB_GAMMA)
-    return np.round(image * 255.0).astype(np.uint8)
-
-
-def save_png(path: Path, image: np.ndarray, srgb: bool = True) -> None:
-    """Save a float image; ``srgb`` gamma-encodes linear colour, False stores data maps as they are."""
-    array = to_uint8(image, srgb)
-    if array.ndim == 3 and array.shape[2] == 1:
-        array = array[..., 0]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(array).save(path)
 
 
 def write_json(path: Path, data: dict) -> None:

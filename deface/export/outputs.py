@@ -13,23 +13,25 @@ render_face.png                            I_R (sRGB) over the working frame (th
 lights/<k>.png, masks/light_<k>.png        I_Rs and M_L of each kept light k (k = the light's index), working frame
 masks/face.png                             M_o, working frame
 loss_log.csv                               stage, step, loss, then one column per named loss term
-report.html + report/                      the page that shows the fit (deface/report/html.py)
+report.html + report/                      the page that shows the fit (deface/report/html.py), when the caller
+                                           passes it as ``page`` (the batch does)
 """
 
 from __future__ import annotations
 
 import platform
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
 
 import deface
-from deface.export.files import save_png, staged_directory, to_uint8, write_json
+from deface.export.files import staged_directory, write_json
 from deface.export.mesh import TEXTURE_FILES, write_glb, write_obj
 from deface.fit.config import to_dict
 from deface.fit.output import FitOutput
-from deface.report.html import write_report
+from deface.io.images import save_png, to_uint8
 
 PARAMS_FORMAT = 3
 """Version of ``params.npz`` (its ``format_version``): 2 holds everything :func:`deface.export.load.load_fit`
@@ -38,8 +40,11 @@ the face (params.json ``crop``) and the whole photo at the working scale (``scen
 in the input's pixels. Format 2 is read as a fit of the whole frame."""
 
 
-def write_fit(result: FitOutput, final_folder: Path, record: dict) -> Path:
-    """Write everything for ``result`` atomically into ``final_folder``; ``record`` adds input details."""
+def write_fit(result: FitOutput, final_folder: Path, record: dict,
+              page: Callable[[FitOutput, Path, str], object] | None = None) -> Path:
+    """Write everything for ``result`` atomically into ``final_folder``; ``record`` adds input details. ``page``
+    (``deface.report.html.write_report``, which the batch passes) writes the fit's page into the staged folder,
+    so that it appears with the rest."""
     renders = result.render()
     with staged_directory(final_folder) as folder:
         _write_textures(result, folder)
@@ -47,7 +52,8 @@ def write_fit(result: FitOutput, final_folder: Path, record: dict) -> Path:
         _write_renders(result, renders, folder)
         _write_params(result, renders, folder, record)
         _write_loss_log(result, folder)
-        write_report(result, folder, final_folder.name)
+        if page is not None:
+            page(result, folder, final_folder.name)
     return final_folder
 
 

@@ -49,7 +49,7 @@ def run_stage2(context: StageContext) -> Stage2Result:
         optimiser.zero_grad(set_to_none=True)
         refresh = step % config.render.shadow_refresh_every == 0
         terms = LossTerms()
-        loss = _stage2_loss(level, before_ace=step < ace_at, refresh_shadows=refresh, terms=terms)
+        loss = objective(level, before_ace=step < ace_at, refresh_shadows=refresh, terms=terms)
         loss.backward()
         optimiser.step()
         scene.clamp_(context.model.expression_prior)
@@ -116,9 +116,9 @@ def _parameter_groups(context: StageContext) -> list[dict]:
     return groups
 
 
-def _stage2_loss(context: StageContext, before_ace: bool, refresh_shadows: bool,
-                 terms: LossTerms | None = None) -> torch.Tensor:
-    """The stage-2 total; ``terms`` collects it by name (frame terms as their mean over frames)."""
+def objective(context: StageContext, before_ace: bool, refresh_shadows: bool,
+              terms: LossTerms | None = None) -> torch.Tensor:
+    """The stage-2 loss (the total); ``terms`` collects it by name (frame terms as their mean over frames)."""
     weights, scene, frames = context.config.weights, context.scene, context.target.num_frames
     terms = terms or LossTerms()
     per_frame = 1.0 / frames

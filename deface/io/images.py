@@ -1,4 +1,4 @@
-"""Image files: load (EXIF orientation, RGBA/grey), sRGB <-> linear (gamma 2.2), resize.
+"""Image files: load (EXIF orientation, RGBA/grey), save as PNG, sRGB <-> linear (gamma 2.2), resize.
 
 Gamma: like NextFace, the sRGB transfer curve is approximated by a pure power law with gamma 2.2
 (``linear = srgb ** 2.2``), not the piecewise IEC 61966-2-1 curve; the two differ by < 1% of full
@@ -102,6 +102,23 @@ def _to_rgb_array(img: Image.Image) -> np.ndarray:
         return np.repeat(grey[..., None], 3, axis=2)
     rgb = img.convert("RGB")
     return np.asarray(rgb, dtype=np.float32) / 255.0
+
+
+def to_uint8(image: np.ndarray, srgb: bool) -> np.ndarray:
+    """[H, W] or [H, W, C] linear float -> uint8, gamma-encoded when ``srgb``."""
+    image = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float32)), 0.0, 1.0)
+    if srgb:
+        image = image ** (1.0 / GAMMA)
+    return np.round(image * 255.0).astype(np.uint8)
+
+
+def save_png(path: Path, image: np.ndarray, srgb: bool = True) -> None:
+    """Save a float image; ``srgb`` gamma-encodes linear colour, False stores data maps as they are."""
+    array = to_uint8(image, srgb)
+    if array.ndim == 3 and array.shape[2] == 1:
+        array = array[..., 0]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(array).save(path)
 
 
 def srgb_to_linear(image: np.ndarray) -> np.ndarray:

@@ -9,8 +9,8 @@ How it is built (once per model, cached in ``~/.cache/deface/correspondence/<mod
    and lids, outer lips, chin; ICT) and the MediaPipe points with the same meaning
    (:data:`IBUG68_TO_MEDIAPIPE`), or the model's own named 3D landmarks (BFM 2017's
    ``metadata/landmarks/json``: eye corners and lids, brows, nose tip, subnasale, lip corners and
-   contour, chin tip) and their MediaPipe equivalents (:data:`NAMED_TO_MEDIAPIPE`), snapped onto the
-   mean surface.
+   contour, chin tip) and their MediaPipe equivalents (:data:`deface.models.landmark_names.NAMED_TO_MEDIAPIPE`),
+   snapped onto the mean surface.
 2. The similarity is refined by trimmed ICP (canonical vertices -> closest model surface points,
    the 20% worst pairs dropped each round).
 3. A non-rigid step: a smoothed thin-plate-spline warp, fitted on the anchor pairs, moves the
@@ -51,6 +51,7 @@ import numpy as np
 import torch
 
 from deface.models.base import FaceModel
+from deface.models.landmark_names import MIN_NAMED_ANCHORS, named_anchor_ids
 from deface.paths import ModelFileError, find_model_file, user_cache_dir
 
 CANONICAL_MESH = "mediapipe-canonical/face_model_with_iris.obj"
@@ -107,39 +108,6 @@ IBUG68_TO_MEDIAPIPE = {
     58: 84,
     59: 181,  # lower outer lip
 }
-
-
-# BFM 2017 landmark name (``metadata/landmarks/json`` ids; "right" = the subject's right) -> MediaPipe index
-# with the same meaning. Left out: ears, trichion and pupils (no MediaPipe surface equivalent), inner lips
-# (the no-mouth model closes them onto one seam) and nose wings (their definition differs between the two).
-NAMED_TO_MEDIAPIPE = {
-    "center.chin.tip": 152,
-    "center.nose.tip": 4,
-    "center.nose.attachement_to_philtrum": 2,
-    "center.lips.upper.outer": 0,
-    "center.lips.lower.outer": 17,
-    "right.lips.corner": 61,
-    "left.lips.corner": 291,
-    "right.lips.philtrum_ridge": 37,
-    "left.lips.philtrum_ridge": 267,
-    "right.eye.corner_outer": 33,
-    "right.eye.corner_inner": 133,
-    "left.eye.corner_inner": 362,
-    "left.eye.corner_outer": 263,
-    "right.eye.top": 159,
-    "right.eye.bottom": 145,
-    "left.eye.top": 386,
-    "left.eye.bottom": 374,
-    "right.eyebrow.inner_upper": 107,
-    "left.eyebrow.inner_upper": 336,
-    "right.eyebrow.bend.upper": 105,
-    "left.eyebrow.bend.upper": 334,
-    "right.eyebrow.inner_lower": 55,
-    "left.eyebrow.inner_lower": 285,
-    "right.eyebrow.bend.lower": 52,
-    "left.eyebrow.bend.lower": 282,
-}
-MIN_NAMED_ANCHORS = 6  # similarity + TPS need a few well-spread pairs; BFM 2017 has 25 of the names above
 
 
 @dataclass(frozen=True)
@@ -283,12 +251,6 @@ def closest_point_on_triangles(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
         result = np.where(((d3 >= 0) & (d4 <= d3))[:, None], b, result)
         result = np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, result)
     return result
-
-
-def named_anchor_ids(names: tuple[str, ...] | list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Which named landmarks have a MediaPipe equivalent: (indices into ``names`` [K], MediaPipe ids [K])."""
-    pairs = [(i, NAMED_TO_MEDIAPIPE[name]) for i, name in enumerate(names) if name in NAMED_TO_MEDIAPIPE]
-    return np.array([i for i, _ in pairs], np.int64), np.array([m for _, m in pairs], np.int64)
 
 
 def model_anchors(model: FaceModel) -> tuple[np.ndarray, np.ndarray]:

@@ -37,6 +37,7 @@ import h5py
 import numpy as np
 
 from deface.models.base import AlbedoModel, FaceModel
+from deface.models.landmark_names import MIN_NAMED_ANCHORS, named_anchor_ids
 from deface.models.uvmap import coverage, rasterize_uv
 from deface.paths import ModelFileError, find_model_file, models_dir_candidates
 
@@ -270,8 +271,6 @@ def _optional_file(explicit: str | None, relative: str, models_dir) -> Path | No
 
 def _check_anchors(path: Path, names: tuple[str, ...], models_dir) -> None:
     """One-line error when the correspondence cannot be built from the file's landmark metadata."""
-    from deface.landmarks.correspondence import MIN_NAMED_ANCHORS, named_anchor_ids
-
     usable = len(named_anchor_ids(names)[0])
     if usable >= MIN_NAMED_ANCHORS:
         return
@@ -318,8 +317,6 @@ def _load_albedomm(path, num_vertices, triangles, uvs, triangle_uvs, config: BFM
 def setup_report(models_dir: str | os.PathLike | None = None) -> tuple[list[str], str | None]:
     """What ``deface fit --model bfm`` would use (landmark metadata, correspondence, UV layout), as lines, and
     a one-line problem when the correspondence could not be had (None when it can)."""
-    from deface.landmarks.correspondence import MIN_NAMED_ANCHORS, named_anchor_ids
-
     target = models_dir_candidates(models_dir)[0]
     correspondence = find_model_file(CORRESPONDENCE_FILE, models_dir)
     uv_layout = find_model_file(UV_LAYOUT_FILE, models_dir)

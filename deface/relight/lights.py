@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from deface.io.images import load_image, srgb_to_linear
 from deface.render.sh import cosine_lobe_coefficients, fibonacci_sphere, sh_basis, white_light
 
 LEVEL = 0.9
@@ -168,8 +169,6 @@ def read_environment_map(path: Path) -> np.ndarray:
         if image is None:
             raise LightSourceError(f"{path}: cannot read this {suffix} environment map")
         return np.ascontiguousarray(image[..., ::-1], dtype=np.float32)
-    from deface.io.images import load_image, srgb_to_linear
-
     return srgb_to_linear(load_image(path))
 
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from deface.export.files import save_png, to_uint8
 from deface.fit.output import FitOutput
 from deface.fit.state import FrameRender
+from deface.io.images import save_png, to_uint8
 
 
 def face_rgba(rendered: FrameRender) -> np.ndarray:

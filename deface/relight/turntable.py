@@ -10,8 +10,8 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from deface.export.files import to_uint8
 from deface.fit.output import FitOutput
+from deface.io.images import to_uint8
 from deface.relight.lights import rotate_lights, yaw_matrix
 from deface.render.camera import Camera
 

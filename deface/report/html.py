@@ -16,8 +16,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from deface.export.files import save_png
+from deface.fit import presets
 from deface.fit.output import FitOutput
+from deface.io.images import save_png
+from deface.relight.lights import preset_lights
+from deface.relight.turntable import turntable_frames, write_animation
 from deface.render.sh import cosine_lobe_coefficients, sh_basis, white_light
 
 REPORT_DIR = "report"
@@ -61,9 +64,6 @@ def lit_sphere(light: torch.Tensor, size: int = SPHERE_SIZE, albedo: float = SPH
 
 def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
     """Write ``folder/report.html`` and its images (``folder/report/``) for ``fit`` written in ``folder``."""
-    from deface.relight.lights import preset_lights
-    from deface.relight.turntable import turntable_frames, write_animation
-
     images = folder / REPORT_DIR
     images.mkdir(parents=True, exist_ok=True)
     base = "" if fit.num_frames == 1 else "frames/000/"
@@ -170,8 +170,6 @@ def _run_tables(fit: FitOutput) -> str:
 
 def config_changes(config) -> list[tuple[str, object, object]]:
     """(dotted name, value, preset value) of every config value that differs from its named preset."""
-    from deface.fit import presets
-
     try:
         reference = presets.get(config.preset.split(":")[0])
     except (KeyError, ValueError):

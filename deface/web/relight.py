@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from deface.export.files import to_uint8
 from deface.export.load import load_fit
 from deface.fit.output import FitOutput
+from deface.io.images import to_uint8
 from deface.relight.lights import PRESETS, preset_lights, rotate_lights, yaw_matrix
 from deface.relight.render import face_rgba
 
