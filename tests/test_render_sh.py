@@ -9,7 +9,8 @@ import pytest
 import torch
 from scipy.special import sph_harm_y
 
-from deface.render.sh import cosine_lobe_coefficients, phong_lobe_filter, sh_basis, sh_basis_rows
+from deface.render.kernels.shading import phong_lobe_filter
+from deface.render.sh import cosine_lobe_coefficients, sh_basis, sh_basis_rows
 
 
 def sphere_quadrature(n_theta: int, n_phi: int):

@@ -33,7 +33,7 @@ from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 
 __all__ = [  # the value handling lives in config_values; callers import it from here with the schema
-    "RENAMED", "CropConfig", "DecoupleConfig", "FitConfig", "Iterations", "LearningRates", "LightConfig",
+    "PAPER", "RENAMED", "CropConfig", "DecoupleConfig", "FitConfig", "Iterations", "LearningRates", "LightConfig",
     "PriorConfig", "RenderConfig", "Stage1Config", "ToneConfig", "Weights", "check_value", "differences",
     "documentation", "field_type", "flatten", "from_dict", "override", "parse_value", "set_from_text",
     "supports_free_tone", "to_dict",
@@ -455,7 +455,7 @@ def from_dict(data: dict, cls: type = None) -> Any:
     every value is checked against its field's type (lists become tuples); an unknown field is an error.
 
     Settings the dict leaves out (a params.json written before they existed) take the values fits ran with
-    then: for a FitConfig the paper's where the shipped method departs from them (``presets.PAPER``, the
+    then: for a FitConfig the paper's where the shipped method departs from them (``PAPER``, the
     defaults until issue 41 made the shipped method the defaults), so that an old run replays as it ran;
     for another class its defaults."""
     cls = cls or FitConfig
@@ -467,10 +467,37 @@ def from_dict(data: dict, cls: type = None) -> Any:
     return override(config, **moved)
 
 
+PAPER = {
+    "lights.num_lights": 5,
+    "decouple.face_region": True,
+    "decouple.epsilon": 0.17,
+    "decouple.clipped_as_bound": False,
+    "decouple.fourier_frequencies": 0,
+    "weights.landmarks": 1e-3,
+    "weights.landmark_units": "pixels",
+    "weights.diffuse_level": 0.0,
+    "iterations.stage2_coarse_share": 0.0,
+    "iterations.stage3_tolerance": 0.0,
+    "iterations.stage3_holdout": 0.0,
+    "learning_rates.stage3_diffuse_level": 0.0,
+    "priors.global_prior": True,
+    "priors.local_prior": True,
+    "tone.free_tone": False,
+    "tone.scene_light_prior": False,
+    "tone.learning_rate": 0.3,
+    "texture_pyramid.levels": 1,
+    "completion.enabled": False,
+    "skin_classifier.beard_zone": False,
+    "skin_classifier.hull_margin": 0.0,
+    "shading_evidence.strength": 0.0,
+}
+"""The paper's method (Table 6 and the authors' code) where the shipped method, FitConfig's defaults, departs
+from it (each field's docstring says why). These were FitConfig's defaults until issue 41, so a params.json
+written then that leaves a setting out ran with its value here (``config.from_dict``)."""
+
+
 def _former_defaults() -> FitConfig:
     """FitConfig's defaults before issue 41: the paper's values, no preset ("custom")."""
-    from deface.fit.presets import PAPER  # the presets build on this module
-
     return override(FitConfig(), **PAPER)
 
 

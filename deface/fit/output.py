@@ -18,7 +18,9 @@ import torch
 from deface.fit.config import FitConfig
 from deface.fit.framing import Framing
 from deface.fit.log import FitLog
+from deface.fit.rendering import render_cast
 from deface.fit.scene import FrameGeometry, topology_tensors
+from deface.fit.stage3 import Stage3Result
 from deface.fit.state import FrameRender, StageContext
 from deface.io.images import srgb_to_linear
 from deface.models.base import FaceModel
@@ -174,15 +176,14 @@ class FitOutput:
 
     @classmethod
     @torch.no_grad()
-    def from_stages(cls, context: StageContext, stage3, finished: FinishedTextures, record: RunRecord) -> FitOutput:
+    def from_stages(cls, context: StageContext, stage3: Stage3Result, finished: FinishedTextures,
+                    record: RunRecord) -> FitOutput:
         """The output of stages 2-3 (``stage3``: :class:`~deface.fit.stage3.Stage3Result`) and of the texture
         completion (``finished``)."""
-        from deface.fit.stage3 import render_frozen
-
         scene, target, config = context.scene, context.target, context.config
         frames = []
         for frozen in stage3.frozen:
-            rendered, _ = render_frozen(context, frozen, finished.textures)
+            rendered, _ = render_cast(context, frozen.index, frozen.cast, finished.textures, frozen.face_region)
             frames.append(OutputFrame(
                 frozen.geometry, frozen.cast, np.asarray(target.frames_srgb[frozen.index], dtype=np.float32),
                 context.inputs.face_classifier[frozen.index], rendered.light_masks.detach(),

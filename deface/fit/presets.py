@@ -32,39 +32,10 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from deface.fit.config import FitConfig, override
+from deface.fit.config import PAPER, FitConfig, override
 
 # Chosen by the evaluation benchmark (BENCHMARKS.md records the comparison).
 DEFAULT_PRESET = "deface"
-
-
-PAPER = {
-    "lights.num_lights": 5,
-    "decouple.face_region": True,
-    "decouple.epsilon": 0.17,
-    "decouple.clipped_as_bound": False,
-    "decouple.fourier_frequencies": 0,
-    "weights.landmarks": 1e-3,
-    "weights.landmark_units": "pixels",
-    "weights.diffuse_level": 0.0,
-    "iterations.stage2_coarse_share": 0.0,
-    "iterations.stage3_tolerance": 0.0,
-    "iterations.stage3_holdout": 0.0,
-    "learning_rates.stage3_diffuse_level": 0.0,
-    "priors.global_prior": True,
-    "priors.local_prior": True,
-    "tone.free_tone": False,
-    "tone.scene_light_prior": False,
-    "tone.learning_rate": 0.3,
-    "texture_pyramid.levels": 1,
-    "completion.enabled": False,
-    "skin_classifier.beard_zone": False,
-    "skin_classifier.hull_margin": 0.0,
-    "shading_evidence.strength": 0.0,
-}
-"""The paper's method (Table 6 and the authors' code) where the shipped method, FitConfig's defaults, departs
-from it (each field's docstring says why). These were FitConfig's defaults until issue 41, so a params.json
-written then that leaves a setting out ran with its value here (``config.from_dict``)."""
 
 
 def _code(*, num_lights: int, epsilon: float, w1: float, w2: float, w4: float, scale: float, sh_lr: float,

@@ -13,7 +13,7 @@ from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, StageContext
 from deface.losses.illuminant import scene_light_colour_loss, scene_light_level_loss
 from deface.losses.photometric import photometric_loss
-from deface.render.frame import render_frame
+from deface.render.frame import FrameCast, render_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import RenderOutput, ShadowTransfer
 
@@ -37,6 +37,14 @@ def render_posed(context: StageContext, frame: int, textures: Textures, refresh_
     output = render_frame(context.renderer, geometry.mesh, geometry.camera, textures,
                           context.scene.lights[context.decoupling.kept], transfer)
     return compose(context, frame, output)
+
+
+def render_cast(context: StageContext, frame: int, cast: FrameCast, textures: Textures,
+                face_region: torch.Tensor | None = None) -> tuple[FrameRender, RenderOutput]:
+    """A frame's cast (stage 3's frozen frames) shaded with ``textures`` under the kept lights, composed; M_o
+    stays ``face_region`` when given. Also the render's buffers."""
+    output = shade_frame(context.renderer, cast, textures, context.scene.lights[context.decoupling.kept])
+    return compose(context, frame, output, face_region), output
 
 
 def compose(context: StageContext, frame: int, output: RenderOutput,

@@ -182,9 +182,7 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
 
 def render_frozen(context: StageContext, frame: FrozenFrame, textures: Textures) -> tuple[FrameRender, RenderOutput]:
     """Shade a frozen frame with ``textures`` and the current kept lights; M_o stays frozen."""
-    output = shade_frame(context.renderer, frame.cast, textures, context.scene.lights[context.decoupling.kept])
-    rendered = rendering.compose(context, frame.index, output, frame.face_region)
-    return rendered, output
+    return rendering.render_cast(context, frame.index, frame.cast, textures, frame.face_region)
 
 
 def freeze_frames(context: StageContext, initial: Textures) -> list[FrozenFrame]:

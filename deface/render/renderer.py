@@ -362,7 +362,7 @@ def _specular_bands(
     The Phong specular radiance per unit k_s is L_spec = sum_l Lambda_l(alpha) S_l(r), r = 2 (n.v) n - v
     the mirrored view direction, with the Phong SH filter Lambda_l = exp(-l²/(2s)), s = 2/alpha² - 2
     (Ramamoorthi & Hanrahan 2001, "A signal-processing framework for inverse rendering"; Walter et al.
-    2007 for s(alpha)); see ``sh.phong_lobe_filter``. A constant environment L gives k_s L.
+    2007 for s(alpha)); see ``kernels.shading.phong_lobe_filter``. A constant environment L gives k_s L.
 
     Approximation: the band sums S_l are evaluated at the *vertices'* reflected directions (vertex
     normal, view from the camera centre to the vertex) and interpolated to the pixels with the

@@ -96,20 +96,6 @@ def _cosine_lobe_values(bands: int) -> tuple[float, ...]:
     return tuple(cosine_lobe_band(l) for l in range(bands) for _ in range(2 * l + 1))
 
 
-def phong_lobe_filter(roughness: torch.Tensor, bands: int) -> torch.Tensor:
-    """SH filter of a normalised Phong lobe around the reflection direction, [...] -> [..., bands].
-
-    Lambda_l = exp(-l² / (2 s)) (Ramamoorthi & Hanrahan 2001, "A signal-processing framework for
-    inverse rendering", Phong BRDF in frequency space), with the Phong exponent from the Beckmann
-    roughness alpha by s = 2 / alpha² - 2 (Walter et al. 2007, "Microfacet models for refraction").
-    Lambda_0 = 1, so a constant environment L reflects k_s L. alpha is clamped to [1e-3, 1].
-    """
-    alpha = roughness.clamp(1e-3, 1.0)
-    exponent = (2.0 / (alpha * alpha) - 2.0).clamp_min(1e-4)  # [...]
-    l_sq = torch.arange(bands, dtype=roughness.dtype, device=roughness.device) ** 2
-    return torch.exp(-l_sq / (2.0 * exponent[..., None]))
-
-
 def fibonacci_sphere(count: int) -> np.ndarray:
     """[count, 3] float64 near-uniform unit directions (equal area each: 4 pi / count)."""
     i = np.arange(count) + 0.5

@@ -77,10 +77,22 @@ def radiance(irradiance, diffuse, lit, visibility, specular) -> torch.Tensor:
     return (diffuse_part + (lit * visibility).reshape(num, -1, 3) * specular[:, None]).reshape(num, -1)
 
 
+def phong_lobe_filter(roughness: torch.Tensor, bands: int) -> torch.Tensor:
+    """SH filter of a normalised Phong lobe around the reflection direction, [...] -> [..., bands].
+
+    Lambda_l = exp(-l² / (2 s)) (Ramamoorthi & Hanrahan 2001, "A signal-processing framework for
+    inverse rendering", Phong BRDF in frequency space), with the Phong exponent from the Beckmann
+    roughness alpha by s = 2 / alpha² - 2 (Walter et al. 2007, "Microfacet models for refraction").
+    Lambda_0 = 1, so a constant environment L reflects k_s L. alpha is clamped to [1e-3, 1].
+    """
+    alpha = roughness.clamp(1e-3, 1.0)
+    exponent = (2.0 / (alpha * alpha) - 2.0).clamp_min(1e-4)  # [...]
+    l_sq = torch.arange(bands, dtype=roughness.dtype, device=roughness.device) ** 2
+    return torch.exp(-l_sq / (2.0 * exponent[..., None]))
+
+
 def _shade_reference(plain, bands_v, uvs, bary, diffuse_map, specular_map, roughness_map, pixels, size):
     """``shade`` in torch ops (the arguments and outputs of ``shade``)."""
-    from deface.render.sh import phong_lobe_filter  # sh.py imports this package: import at call time
-
     covered, corners, uv_corners = pixels
     num_channels, bands = bands_v.shape[2], bands_v.shape[1]
     parts = plain_slices(num_channels // 3)
@@ -218,7 +230,7 @@ def _pixel_inputs(plain, flat_bands, uvs, bary, roughness_map, p, corners, uv_co
 
 @njit(inline="always")
 def _phong_lobe(roughness, lobe):
-    """sh.phong_lobe_filter into ``lobe`` [B]; returns the exponent s and d s / d roughness."""
+    """phong_lobe_filter into ``lobe`` [B]; returns the exponent s and d s / d roughness."""
     alpha, d_alpha = roughness, 1.0
     if roughness < 1e-3:
         alpha, d_alpha = 1e-3, 0.0
