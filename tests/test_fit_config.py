@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from deface.cli import options
 from deface.cli.main import app
-from deface.fit import presets
+from deface.fit import presets, user_options
 from deface.fit.config import (
     RENAMED,
     FitConfig,
@@ -82,34 +82,34 @@ def test_every_setting_is_documented_and_reachable_with_set():
 
 
 def test_command_line_order_preset_then_shortcuts_then_sets():
-    config = options.fit_config("fast", None, ["lights.num_lights=4", "iterations.stage2=7"], lights=2,
+    config = user_options.fit_config("fast", None, ["lights.num_lights=4", "iterations.stage2=7"], lights=2,
                                 iterations="5,6,9", priors="gp", seed=3)
     assert config.preset == "fast" and config.seed == 3
     assert config.lights.num_lights == 4
     assert config.iterations == replace(presets.get("fast").iterations, stage1=5, stage2=7, stage3=9)
     assert (config.priors.global_prior, config.priors.local_prior, config.priors.human_prior) == (True, False, False)
-    assert options.fit_config() == presets.get("default")
-    with pytest.raises(options.UsageError, match="--set resolution=x: resolution must be an integer"):
-        options.fit_config("fast", None, ["resolution=x"])
-    with pytest.raises(options.UsageError, match="--model"):
-        options.fit_config(None, None, ["model=flame"])
+    assert user_options.fit_config() == presets.get("default")
+    with pytest.raises(user_options.UsageError, match="--set resolution=x: resolution must be an integer"):
+        user_options.fit_config("fast", None, ["resolution=x"])
+    with pytest.raises(user_options.UsageError, match="--model"):
+        user_options.fit_config(None, None, ["model=flame"])
 
 
 def test_config_file_replays_a_params_json(tmp_path):
     config = override(presets.get("code-video"), seed=7, **{"priors.palette_samples": 500})
     (tmp_path / "params.json").write_text(json.dumps({"preset": "code-video", "config": to_dict(config)}))
-    assert options.fit_config(None, tmp_path) == config
-    assert options.fit_config(None, tmp_path / "params.json", ["seed=8"]) == replace(config, seed=8)
-    with pytest.raises(options.UsageError, match="not both"):
-        options.fit_config("fast", tmp_path)
+    assert user_options.fit_config(None, tmp_path) == config
+    assert user_options.fit_config(None, tmp_path / "params.json", ["seed=8"]) == replace(config, seed=8)
+    with pytest.raises(user_options.UsageError, match="not both"):
+        user_options.fit_config("fast", tmp_path)
     (tmp_path / "empty").mkdir()
-    with pytest.raises(options.UsageError, match="no params.json in that folder"):
-        options.fit_config(None, tmp_path / "empty")
-    with pytest.raises(options.UsageError, match="missing.json: no such file"):
-        options.fit_config(None, tmp_path / "missing.json")
+    with pytest.raises(user_options.UsageError, match="no params.json in that folder"):
+        user_options.fit_config(None, tmp_path / "empty")
+    with pytest.raises(user_options.UsageError, match="missing.json: no such file"):
+        user_options.fit_config(None, tmp_path / "missing.json")
     (tmp_path / "bad.json").write_text("{")
-    with pytest.raises(options.UsageError, match="not JSON"):
-        options.fit_config(None, tmp_path / "bad.json")
+    with pytest.raises(user_options.UsageError, match="not JSON"):
+        user_options.fit_config(None, tmp_path / "bad.json")
 
 
 def test_stage1_rigid_steps_default_to_a_quarter_at_most_80():

@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from deface.cli.main import app
-from deface.cli.options import UsageError, fit_config
+from deface.fit.user_options import UsageError, fit_config
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.priors import checker
 from deface.priors.illuminant import IlluminantConfig, known_illuminant, planckian_rgb

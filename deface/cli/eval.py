@@ -9,6 +9,7 @@ import typer
 from rich.markup import escape
 
 from deface.cli import options
+from deface.fit import user_options
 from deface.fit.log import console
 
 
@@ -40,8 +41,8 @@ def pairs_command(
     from deface.eval.report import write_index_html, write_metrics_json
 
     try:
-        options.check_models_dir(models)
-        config = options.fit_config(preset, config_file, sets, iterations=iterations, lights=lights, bands=bands,
+        user_options.check_models_dir(models)
+        config = user_options.fit_config(preset, config_file, sets, iterations=iterations, lights=lights, bands=bands,
                                     light_masks=light_masks, face_region=face_region, priors=priors)
         pairs = read_pairs(directory)
     except (ValueError, FileNotFoundError) as error:

@@ -15,6 +15,7 @@ from deface.batch.run import BatchOptions, Interrupted, run_batch
 from deface.batch.task import error_message
 from deface.cli import options
 from deface.export.files import OutputError, check_writable
+from deface.fit import user_options
 from deface.fit.config import FitConfig
 from deface.fit.log import console
 from deface.io.images import InputError
@@ -77,9 +78,9 @@ def fit_command(
 ) -> None:
     """Fit each input and write OUT/<input stem>/ (textures, mesh.obj/.mtl/.glb, params, renders, masks)."""
     try:
-        options.check_output(output)
-        options.check_models_dir(models)
-        config = options.fit_config(
+        user_options.check_output(output)
+        user_options.check_models_dir(models)
+        config = user_options.fit_config(
             preset, config_file, sets, model=model, seed=seed, lights=lights, bands=bands, light_masks=light_masks,
             face_region=face_region, priors=priors, resolution=resolution, texture_size=texture_size,
             iterations=iterations, max_frames=max_frames, frame_stride=frame_stride, face_index=face_index,
@@ -102,11 +103,11 @@ def fit_command(
 
 
 def _batch_options(jobs, engine, ray_address, ray_outputs, overwrite, retry_failed, quiet, verbose) -> BatchOptions:
-    options.check_ranges({"--jobs": jobs})
-    options.check_choice("--engine", engine, ("local", "ray"))
-    options.check_choice("--ray-outputs", ray_outputs, ("driver", "shared"))
+    user_options.check_ranges({"--jobs": jobs})
+    user_options.check_choice("--engine", engine, ("local", "ray"))
+    user_options.check_choice("--ray-outputs", ray_outputs, ("driver", "shared"))
     if engine != "ray" and ray_address:
-        raise options.UsageError("--ray-address needs --engine ray")
+        raise user_options.UsageError("--ray-address needs --engine ray")
     return BatchOptions(jobs=jobs, overwrite=overwrite, retry_failed=retry_failed, quiet=quiet, verbose=verbose,
                         engine=engine, ray_address=ray_address, ray_outputs=ray_outputs)
 

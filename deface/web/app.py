@@ -18,8 +18,8 @@ from pathlib import Path
 
 import gradio as gr
 
-from deface.cli.options import UsageError
 from deface.fit import presets
+from deface.fit.user_options import UsageError
 from deface.io.images import InputError
 from deface.relight.lights import LightSourceError
 from deface.web.config import CARD_REFLECTANCES, WebConfig

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from deface.cli import options
+from deface.fit import user_options
 from deface.fit.config import FitConfig
 
 PAGE_PRESETS = ("default", "fast", "paper", "nextface")
@@ -53,31 +53,31 @@ class WebConfig:
     def fit_config(self, preset: str, card_box: tuple[float, float, float, float] | None = None,
                    card_reflectance: float | None = None) -> FitConfig:
         """The configuration of one job: ``preset``, the operator's settings, then the grey card (if any).
-        Raises :class:`deface.cli.options.UsageError` (one line) for a bad value."""
+        Raises :class:`deface.fit.user_options.UsageError` (one line) for a bad value."""
         if preset not in self.presets:
-            raise options.UsageError(f"preset must be one of {', '.join(self.presets)}, got '{preset}'")
+            raise user_options.UsageError(f"preset must be one of {', '.join(self.presets)}, got '{preset}'")
         sets = list(self.settings)
         if card_box is not None:
             sets.append("tone.illuminant.reference_box=" + ",".join(f"{v:.4f}" for v in card_box))
             if card_reflectance is not None:
                 sets.append(f"tone.illuminant.reference_reflectance={card_reflectance}")
-        return options.fit_config(preset, None, sets, iterations=self.iterations, resolution=self.resolution,
+        return user_options.fit_config(preset, None, sets, iterations=self.iterations, resolution=self.resolution,
                                   texture_size=self.texture_size)
 
     def check(self) -> None:
         """Usage errors before the server starts: an unknown preset, a bad setting, limits out of range."""
-        options.check_ranges({"--jobs": self.workers})
-        options.check_models_dir(self.models)
-        options.check_output(self.output)
+        user_options.check_ranges({"--jobs": self.workers})
+        user_options.check_models_dir(self.models)
+        user_options.check_output(self.output)
         if not 1 <= self.port <= 65535:
-            raise options.UsageError(f"--port must be from 1 to 65535, got {self.port}")
+            raise user_options.UsageError(f"--port must be from 1 to 65535, got {self.port}")
         if not 0 < self.max_file_mb <= 10_000:
-            raise options.UsageError(f"--max-file-mb must be from 0 to 10000 MB, got {self.max_file_mb}")
+            raise user_options.UsageError(f"--max-file-mb must be from 0 to 10000 MB, got {self.max_file_mb}")
         if not 1 <= self.max_files <= 1000:
-            raise options.UsageError(f"--max-files must be from 1 to 1000, got {self.max_files}")
+            raise user_options.UsageError(f"--max-files must be from 1 to 1000, got {self.max_files}")
         if self.keep_jobs is not None and self.keep_jobs < 1:
-            raise options.UsageError(f"--keep-jobs must be at least 1, got {self.keep_jobs}")
+            raise user_options.UsageError(f"--keep-jobs must be at least 1, got {self.keep_jobs}")
         if not self.presets:
-            raise options.UsageError("the page needs at least one preset")
+            raise user_options.UsageError("the page needs at least one preset")
         for preset in self.presets:
             self.fit_config(preset)
