@@ -32,8 +32,8 @@ def main() -> None:
 
     def slow_fit(frames, config, **_):
         _pause(mode, "fit", float(seconds))
-        # what the record reads of a result (FitOutput.kept and .skin_tone())
-        return SimpleNamespace(frames=len(frames), kept=(0,),
+        # what the record reads of a result (FitOutput.lights.kept and .skin_tone())
+        return SimpleNamespace(frames=len(frames), lights=SimpleNamespace(kept=(0,)),
                                skin_tone=lambda: {"texture_ita": 40.0, "ita_interval": [30.0, 50.0]})
 
     def slow_write(result, folder, record, page=None):
