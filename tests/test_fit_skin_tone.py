@@ -87,6 +87,7 @@ def neutral_fits(shared):
 
 
 @pytest.mark.slow
+@pytest.mark.slow  # a module fixture of whole fits
 def test_dark_and_light_skin_under_one_light_keep_their_tones(neutral_fits):
     dark, light = recovered_ita(neutral_fits[0.0]), recovered_ita(neutral_fits[50.0])
     assert light - dark > 30, (dark, light)
@@ -94,6 +95,7 @@ def test_dark_and_light_skin_under_one_light_keep_their_tones(neutral_fits):
 
 
 @pytest.mark.slow
+@pytest.mark.slow  # a module fixture of whole fits
 def test_one_skin_under_warm_and_cold_light_keeps_one_tone(neutral_fits):
     warm = recovered_ita(fit_scene(50.0, 3000.0))
     cold = recovered_ita(neutral_fits[50.0])
@@ -101,6 +103,7 @@ def test_one_skin_under_warm_and_cold_light_keeps_one_tone(neutral_fits):
 
 
 @pytest.mark.slow
+@pytest.mark.slow  # a module fixture of whole fits
 def test_without_the_scene_light_prior_the_tones_collapse(neutral_fits):
     """The ablation shows what the prior does: with free lights a dark skin drifts towards the light one."""
     free = recovered_ita(fit_scene(0.0, 6504.0, **{"tone.scene_light_prior": False}))
@@ -109,6 +112,7 @@ def test_without_the_scene_light_prior_the_tones_collapse(neutral_fits):
 
 
 @pytest.mark.slow
+@pytest.mark.slow  # a module fixture of whole fits
 def test_stage2_leaves_the_tone_to_the_tone_axis(neutral_fits):
     """T^0's tone is the one the axis alone gives at the fitted tone: the albedo coefficients did not move it
     (deface/models/tone_neutral.py). Runs before the flat-cost test, which moves the fits' tone."""
@@ -119,6 +123,7 @@ def test_stage2_leaves_the_tone_to_the_tone_axis(neutral_fits):
         assert fitted == pytest.approx(texture_ita(linear_to_srgb(axis_only.numpy())), abs=1.0)
 
 
+@pytest.mark.slow  # a module fixture of whole fits
 def test_prior_cost_is_flat_over_tone(neutral_fits):
     """Stage 2's terms other than the photometric one do not change with the tone."""
     context = neutral_fits[0.0].context
@@ -131,6 +136,7 @@ def test_prior_cost_is_flat_over_tone(neutral_fits):
     assert np.ptp(costs) <= 1e-6 * max(abs(c) for c in costs)
 
 
+@pytest.mark.slow  # a module fixture of whole fits
 def test_params_record_the_tone_and_the_scene_light(neutral_fits, tmp_path):
     import json
 

@@ -80,11 +80,13 @@ def jobs(web, photos, bad_files):
     return ids, waiting
 
 
+@pytest.mark.slow  # a module fixture of whole fits
 def test_the_second_job_waits_and_the_page_says_so(jobs):
     _, waiting = jobs
     assert "**Job 2** (2 files, preset fast): waiting, 1 job ahead of yours" in waiting
 
 
+@pytest.mark.slow  # a module fixture of whole fits
 def test_faceless_broken_and_unsupported_files_get_one_line_each(web, jobs):
     ids, _ = jobs
     status = web.status_text(ids)
@@ -99,6 +101,7 @@ def test_faceless_broken_and_unsupported_files_get_one_line_each(web, jobs):
         assert "\n" not in line and len(line) < 400
 
 
+@pytest.mark.slow  # a module fixture of whole fits
 def test_a_photo_gives_the_zip_of_deface_fit(web, jobs, photos, tmp_path):
     ids, _ = jobs
     update = web.refresh(ids, {}, None)
@@ -140,6 +143,7 @@ def compare(name: str, ours: bytes, theirs: bytes) -> None:
         assert ours == theirs, name
 
 
+@pytest.mark.slow  # a module fixture of whole fits
 def test_a_batch_lists_its_results_and_zips_them_all(web, jobs):
     ids, _ = jobs
     update = web.refresh(ids, {}, None)
@@ -154,6 +158,7 @@ def test_a_batch_lists_its_results_and_zips_them_all(web, jobs):
     assert again[web.result] == {"__type__": "update"}  # unchanged: the page keeps its selection
 
 
+@pytest.mark.slow  # a module fixture of whole fits
 def test_the_page_shows_the_fit_and_relights_it(web, jobs):
     ids, _ = jobs
     key = web.refresh(ids, {}, None)[web.result].value
@@ -174,6 +179,7 @@ def test_the_page_shows_the_fit_and_relights_it(web, jobs):
     assert all(value == {"__type__": "update"} for value in other_page.values())
 
 
+@pytest.mark.slow  # a module fixture of whole fits
 def test_a_job_folder_is_a_deface_fit_output_with_its_inputs_and_zips(web, jobs):
     output = web.config.output
     job = output / jobs[0][1]
