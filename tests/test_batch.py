@@ -283,6 +283,10 @@ def test_recorded_tasks_run_once_per_configuration_and_report_in_order(tmp_path,
     again = run_recorded(_recorded_tasks(tmp_path, config), jobs)
     assert [r["value"] for r in again] == [0, 1, 2, 3] and again[2:] == records[2:]
     assert again[1]["pid"] == os.getpid()  # the one task left runs in this process, whatever ``jobs``
+    # A torn record (a kill mid-write) is redone too, and no partial file is left beside the records.
+    (tmp_path / "t3" / "record.json").write_text('{"value": 3, "con')
+    assert run_recorded(_recorded_tasks(tmp_path, config), 1)[3]["value"] == 3
+    assert not list(tmp_path.rglob("*.partial"))
 
 
 def test_a_failed_recorded_task_fails_the_run_after_the_others(tmp_path):

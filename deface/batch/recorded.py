@@ -9,6 +9,7 @@ face model and MediaPipe, 1 torch thread each; a dead worker's task is tried onc
 from __future__ import annotations
 
 import json
+import os
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -60,10 +61,12 @@ def run_recorded(tasks: list[RecordedTask], jobs: int = 1, models_dir=None,
 
 
 def run_task(task: RecordedTask) -> dict:
-    """Run one task and write its record (its fields, then its configuration)."""
+    """Run one task and write its record (its fields, then its configuration), atomically."""
     record = {**task.work(), "config": config_record(task.config)}
     task.record.parent.mkdir(parents=True, exist_ok=True)
-    task.record.write_text(json.dumps(record, indent=1))
+    partial = task.record.with_name(f".{task.record.name}.partial")
+    partial.write_text(json.dumps(record, indent=1))
+    os.replace(partial, task.record)  # whole or absent: a kill mid-write leaves the task to be redone
     return record
 
 

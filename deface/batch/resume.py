@@ -78,10 +78,11 @@ def config_record(config: FitConfig) -> dict:
 def finished_record(path: Path, config: FitConfig) -> dict | None:
     """The JSON record at ``path`` when its task finished with this very configuration (its ``config`` is
     :func:`config_record` of ``config``), else None: the task is (re)done."""
-    if not path.exists():
+    try:
+        record = json.loads(path.read_text())
+    except (FileNotFoundError, json.JSONDecodeError):  # not made yet, or torn by a writer older than run_task's
         return None
-    record = json.loads(path.read_text())
-    return record if record.get("config") == config_record(config) else None
+    return record if isinstance(record, dict) and record.get("config") == config_record(config) else None
 
 
 def check_distinct_outputs(items: list[InputItem]) -> None:
