@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-VOLATILE = {"seconds_per_stage", "versions", "input", "commit", "created"}
+VOLATILE = {"seconds_per_stage", "versions", "input"}  # when, with what, from where
 
 
 def _strip(value):

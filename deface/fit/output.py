@@ -198,6 +198,7 @@ class FitOutput:
             lights=FitLights(scene.lights.detach().clone(), tuple(context.decoupling.kept)),
             textures=finished.textures,
             texels=FitTexels(stage3.initial, finished.seen, finished.confidence, tuple(stage3.views)),
+            # as params.json records it (rounded), so a fit and its reload report the same tone interval
             illuminant=None if light is None else IlluminantEstimate.from_record(light.illuminant.record()),
             framing=target.framing, kept_frames=target.kept_frames, record=record, renderer=context.renderer)
 
