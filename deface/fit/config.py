@@ -94,6 +94,13 @@ class DecoupleConfig:
     On raw coordinates (0, the authors' (x, y, t)) f draws only smooth, blob-like masks, and the edges of blinds,
     fingers and leaves were baked into the texture; more octaves let the masks follow a beard (docs/design.md
     "Default preset")."""
+    mask_fill: float = 0.0
+    """Widest Gaussian (share of the working image's longer side) over which a light mask, at a pixel with little
+    shading evidence (``shading_evidence``: a beard, a mole, a shadow's edge band), is taken from the pixels
+    around that have it (deface/decouple/fill.py), in stages 2 and 3; 0 = the masks f draws there."""
+    mask_fill_finest: float = 0.0
+    """Finest Gaussian (pixels) of that fill: the mean is taken at the finest of mask_fill, mask_fill / 2, ...
+    that holds evidence, so a dappled shadow's masks are filled from a few pixels away; 0 = mask_fill only."""
     face_region_source: Literal["auto", "skin", "bisenet", "none"] = "auto"
     """Classifier h distilled into g: BiSeNet with the user's checkpoint when present ("auto"), else the
     project's skin-colour model ("skin"); "none" uses the render mask."""

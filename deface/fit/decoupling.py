@@ -13,6 +13,7 @@ import torch
 from deface.decouple.ace import ace_select
 from deface.decouple.coords import video_coordinates
 from deface.decouple.fields import FaceRegionField, LightMaskField
+from deface.decouple.fill import fill_from_evidence
 from deface.fit.config import DecoupleConfig
 
 
@@ -32,6 +33,12 @@ class Decoupling(torch.nn.Module):
         self.register_buffer("coords", video_coordinates(num_frames, height, width))  # [T, H, W, 3]
         self._other_sizes: dict[tuple[int, int], torch.Tensor] = {}  # stage 2's half-size level
         self._kept = list(range(num_lights))
+        self._evidence: dict[tuple[int, int], torch.Tensor] = {}  # [T, H, W] per size (set_evidence)
+
+    def set_evidence(self, evidence: torch.Tensor) -> None:
+        """Stage 2's shading evidence [T, H, W] in [0, 1] (h times deface/priors/shading_evidence.py's weight):
+        with ``config.mask_fill``, masks where it is low come from the pixels around (deface/decouple/fill.py)."""
+        self._evidence = {tuple(evidence.shape[1:]): evidence.float()}
 
     @property
     def kept(self) -> list[int]:
@@ -47,7 +54,20 @@ class Decoupling(torch.nn.Module):
         covered = coverage > 0
         masks = coverage.new_zeros((*coverage.shape, len(self._kept)))  # [H, W, K_kept]
         masks = masks.index_put((covered,), self.light_field(self._coordinates(frame, covered.shape)[covered]))
-        return masks.permute(2, 0, 1) * coverage
+        masks = masks.permute(2, 0, 1) * coverage
+        if not self._evidence or self.config.mask_fill <= 0 or masks.shape[0] < 2:
+            return masks
+        evidence = self._evidence_at(frame, tuple(coverage.shape)) * coverage
+        sigma = self.config.mask_fill * max(coverage.shape)
+        return fill_from_evidence(masks, evidence, sigma, self.config.mask_fill_finest) * coverage
+
+    def _evidence_at(self, frame: int, shape: tuple[int, int]) -> torch.Tensor:
+        """The evidence [H, W] of ``frame`` at ``shape`` (resampled from the size it was set at)."""
+        if shape not in self._evidence:
+            source = next(iter(self._evidence.values()))
+            self._evidence[shape] = torch.nn.functional.interpolate(
+                source[:, None], size=shape, mode="bilinear", align_corners=False)[:, 0].clamp(0.0, 1.0)
+        return self._evidence[shape][frame]
 
     def region_probability(self, frame: int, coverage: torch.Tensor) -> torch.Tensor | None:
         """g [H, W] where the face is rendered (0 elsewhere: M_o = M_R g and L_seg only see it there)."""

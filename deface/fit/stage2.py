@@ -84,6 +84,7 @@ def _weighted_by_evidence(context: StageContext) -> StageContext:
     weighted = tuple(h * torch.as_tensor(texture_weight(context.target.images[frame].numpy(), h.numpy(),
                                                         float(sizes[frame]), evidence))
                      for frame, h in enumerate(inputs.face_classifier))
+    context.decoupling.set_evidence(torch.stack(weighted))
     return replace(context, inputs=replace(inputs, face_classifier=weighted))
 
 
