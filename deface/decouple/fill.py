@@ -10,8 +10,8 @@ around it, so a mask there is the one the evidence around says:
 
 Where w = 1, M' = M; inside a beard, the masks of the skin around it; across a shadow's edge band, a ramp between
 the masks on either side. M' still sums to the coverage over the lights. With one wide Gaussian a dappled shadow
-(leaves: edge bands everywhere) had its masks blurred and was baked into the map, so the mean is taken at the
-finest scale that holds evidence (:func:`nearest_evidence_mean`).
+(leaves: edge bands everywhere) had its masks blurred and was baked into the map; ``near`` fills only pixels
+far from any evidence (docs/textures.md has what each kept and lost).
 """
 
 from __future__ import annotations
@@ -39,35 +39,24 @@ def gaussian_blur(images: torch.Tensor, sigma: float) -> torch.Tensor:
     return both[0]
 
 
-def fill_from_evidence(masks: torch.Tensor, evidence: torch.Tensor, sigma: float, finest: float = 0.0) -> torch.Tensor:
+def fill_from_evidence(masks: torch.Tensor, evidence: torch.Tensor, sigma: float, near: float = 0.0) -> torch.Tensor:
     """Masks [K, H, W] with each pixel's value blended, by 1 - ``evidence`` [H, W] in [0, 1], towards the
-    evidence-weighted mean of the masks around it (the module doc): within a Gaussian of ``sigma`` pixels, or, with
-    ``finest`` > 0, within the smallest of the Gaussians ``sigma``, ``sigma`` / 2, ... down to ``finest`` that
-    holds enough evidence (:func:`nearest_evidence_mean`)."""
-    around = nearest_evidence_mean(masks, evidence, sigma, finest) if finest > 0 else \
-        _evidence_mean(masks, evidence, sigma)[0]
-    return evidence * masks + (1.0 - evidence) * around
+    evidence-weighted mean of the masks within a Gaussian of ``sigma`` pixels (the module doc). With ``near`` > 0
+    only pixels with little evidence within a Gaussian of ``near`` pixels are blended (:func:`far_from_evidence`):
+    a beard's inside, not the thin band along a shadow's edge, whose masks f fits from the skin either side."""
+    around = _evidence_mean(masks, evidence, sigma)[0]
+    share = (1.0 - evidence) * far_from_evidence(evidence, near) if near > 0 else 1.0 - evidence
+    return masks + share * (around - masks)
 
 
 DENSE = 0.5
-"""Share of a Gaussian's weight with evidence at which its mean is taken as it is (less: blended with the next
-wider one's in proportion)."""
+"""Share of a Gaussian's weight with evidence above which a pixel counts as near evidence (less: in proportion)."""
 
 
-def nearest_evidence_mean(masks: torch.Tensor, evidence: torch.Tensor, sigma: float, finest: float) -> torch.Tensor:
-    """[K, H, W]: per pixel, the evidence-weighted mean of the masks at the finest scale whose Gaussian holds
-    evidence (weight ``DENSE`` and more), blended towards wider scales up to ``sigma`` where it holds less: a thin
-    band along a shadow's edge takes its masks from a few pixels either side, the inside of a beard from the skin
-    around it (a push-pull fill from coarse to fine)."""
-    scales = [sigma]
-    while scales[-1] / 2.0 >= finest:
-        scales.append(scales[-1] / 2.0)
-    around = _evidence_mean(masks, evidence, scales[0])[0]
-    for scale in scales[1:]:
-        mean, density = _evidence_mean(masks, evidence, scale)
-        share = (density / DENSE).clamp(max=1.0)
-        around = share * mean + (1.0 - share) * around
-    return around
+def far_from_evidence(evidence: torch.Tensor, near: float) -> torch.Tensor:
+    """[H, W] in [0, 1]: 1 where a Gaussian of ``near`` pixels holds no evidence, 0 where it holds ``DENSE``."""
+    density = gaussian_blur(evidence[None], near)[0]
+    return 1.0 - (density / DENSE).clamp(max=1.0)
 
 
 def _evidence_mean(masks: torch.Tensor, evidence: torch.Tensor, sigma: float) -> tuple[torch.Tensor, torch.Tensor]:

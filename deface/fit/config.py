@@ -95,12 +95,15 @@ class DecoupleConfig:
     fingers and leaves were baked into the texture; more octaves let the masks follow a beard (docs/design.md
     "Default preset")."""
     mask_fill: float = 0.0
-    """Widest Gaussian (share of the working image's longer side) over which a light mask, at a pixel with little
+    """Gaussian (share of the working image's longer side) over which a light mask, at a pixel with little
     shading evidence (``shading_evidence``: a beard, a mole, a shadow's edge band), is taken from the pixels
-    around that have it (deface/decouple/fill.py), in stages 2 and 3; 0 = the masks f draws there."""
-    mask_fill_finest: float = 0.0
-    """Finest Gaussian (pixels) of that fill: the mean is taken at the finest of mask_fill, mask_fill / 2, ...
-    that holds evidence, so a dappled shadow's masks are filled from a few pixels away; 0 = mask_fill only."""
+    around that have it (deface/decouple/fill.py), in stages 2 and 3; 0 = the masks f draws there. Off: it keeps
+    more of a beard but blurs a dappled or finger-shaped shadow's masks (docs/textures.md "Where the beard
+    goes")."""
+    mask_fill_near: float = 0.0
+    """Gaussian (share of the working image's longer side) within which evidence keeps a pixel's own mask: only
+    pixels far from any evidence are filled (a beard's inside, not a shadow's edge band); 0 = every pixel in
+    proportion to its lack of evidence."""
     face_region_source: Literal["auto", "skin", "bisenet", "none"] = "auto"
     """Classifier h distilled into g: BiSeNet with the user's checkpoint when present ("auto"), else the
     project's skin-colour model ("skin"); "none" uses the render mask."""

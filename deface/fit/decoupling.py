@@ -58,8 +58,9 @@ class Decoupling(torch.nn.Module):
         if not self._evidence or self.config.mask_fill <= 0 or masks.shape[0] < 2:
             return masks
         evidence = self._evidence_at(frame, tuple(coverage.shape)) * coverage
-        sigma = self.config.mask_fill * max(coverage.shape)
-        return fill_from_evidence(masks, evidence, sigma, self.config.mask_fill_finest) * coverage
+        side = max(coverage.shape)
+        filled = fill_from_evidence(masks, evidence, self.config.mask_fill * side, self.config.mask_fill_near * side)
+        return filled * coverage
 
     def _evidence_at(self, frame: int, shape: tuple[int, int]) -> torch.Tensor:
         """The evidence [H, W] of ``frame`` at ``shape`` (resampled from the size it was set at)."""
