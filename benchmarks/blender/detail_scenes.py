@@ -42,9 +42,20 @@ import bpy
 from bpy_extras.object_utils import world_to_camera_view
 from mathutils import Matrix, Vector
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # Blender runs this file directly: find scene_common
+import scene_common  # noqa: E402
+from scene_common import (  # noqa: E402
+    MESH,
+    NOMINAL_IRRADIANCE,
+    SHARED,
+    camera,
+    diffuse_material,
+    direction_of,
+    environment,
+    light,
+)
+
 DETAIL = SHARED / "detail-synth"
-MESH = DETAIL / "mesh.obj"
 BASES = SHARED / "skin-tone-synth" / "albedo"
 MASKS = ("beard", "freckles", "freckle_area", "birthmark", "forehead")
 FEATURES = ("beard", "freckles", "birthmark")
@@ -93,8 +104,6 @@ SCENES = {
 DEFAULT_SCENES = ("leaves", "hand", "side", "warmcool", "top")
 """The scenes rendered without ``--only``: the first report split (``/work/detail-report``). The others
 (blinds, branch, brimside, fingers) make a second held-out split, rendered into their own folder with ``--only``."""
-NOMINAL_IRRADIANCE = 3.0
-"""W/m^2 of a key light at the face at strength 1 (as tone_scenes.py)."""
 WALL = dict(reflectance=0.35, distance=0.6)
 """The grey wall: its reflectance and its distance behind the head's centre, m."""
 LEAVES = dict(seed=7, count=270, spread=0.6, length=(0.015, 0.035), width=(0.35, 0.55), depth=0.04)
@@ -220,50 +229,9 @@ def write_truth(out, tones):
 
 # --- the scene ---
 
-def blackbody_node(tree, kelvin):
-    node = tree.nodes.new("ShaderNodeBlackbody")
-    node.inputs["Temperature"].default_value = kelvin
-    return node
-
-
 def reset(samples):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = samples
-    scene.cycles.seed = 0
-    scene.cycles.use_denoising = False  # Debian's Blender 3.4 has no OpenImageDenoise
-    scene.render.resolution_x = scene.render.resolution_y = 512
-    scene.render.resolution_percentage = 100
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-    scene.view_settings.exposure = 0.0
-    scene.render.image_settings.file_format = "PNG"
-    scene.render.image_settings.color_depth = "8"
-    scene.render.image_settings.color_mode = "RGB"
-    return scene
-
-
-def face(albedo_path):
-    bpy.ops.wm.obj_import(filepath=str(MESH), forward_axis="NEGATIVE_Z", up_axis="Y")
-    obj = bpy.context.selected_objects[0]
-    obj.scale = (0.01, 0.01, 0.01)
-    bpy.ops.object.transform_apply(scale=True)
-    bpy.ops.object.shade_smooth()
-    material = bpy.data.materials.new("skin")
-    material.use_nodes = True
-    bsdf = material.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Subsurface"].default_value = 0.0
-    texture = material.node_tree.nodes.new("ShaderNodeTexImage")
-    texture.image = bpy.data.images.load(str(albedo_path))
-    material.node_tree.links.new(texture.outputs["Color"], bsdf.inputs["Base Color"])
-    bsdf.inputs["Specular"].default_value = 0.35
-    bsdf.inputs["Roughness"].default_value = 0.45
-    obj.data.materials.clear()
-    obj.data.materials.append(material)
-    corners = [obj.matrix_world @ Vector(c) for c in obj.bound_box]
-    return obj, sum(corners, Vector()) / 8
+    """8-bit PNG, seed 0, no denoiser (Debian's Blender 3.4 has no OpenImageDenoise)."""
+    return scene_common.reset(samples, "PNG", "8", denoise=False, seed=0)
 
 
 def surface_point(obj, centre, offset):
@@ -273,71 +241,10 @@ def surface_point(obj, centre, offset):
     return location if hit else Vector((start.x, centre.y, start.z))
 
 
-def diffuse_material(name, colour):
-    material = bpy.data.materials.new(name)
-    material.use_nodes = True
-    tree = material.node_tree
-    tree.nodes.remove(tree.nodes["Principled BSDF"])
-    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
-    diffuse.inputs["Color"].default_value = (*colour, 1.0)
-    tree.links.new(diffuse.outputs["BSDF"], tree.nodes["Material Output"].inputs["Surface"])
-    return material
-
-
-def direction_of(angle):
-    azimuth, elevation = (math.radians(a) for a in angle)
-    return Vector((math.sin(azimuth) * math.cos(elevation), -math.cos(azimuth) * math.cos(elevation),
-                   math.sin(elevation)))
-
-
-def camera(scene, centre):
-    data = bpy.data.cameras.new("camera")
-    data.lens, data.sensor_width = 85.0, 36.0
-    obj = bpy.data.objects.new("camera", data)
-    scene.collection.objects.link(obj)
-    obj.location = (centre.x, centre.y - 1.1, centre.z)
-    obj.rotation_euler = (math.pi / 2, 0.0, 0.0)
-    scene.camera = obj
-    return obj
-
-
 def wall(centre):
     bpy.ops.mesh.primitive_plane_add(size=4.0, location=(centre.x, centre.y + WALL["distance"], centre.z),
                                      rotation=(math.pi / 2, 0, 0))
     bpy.context.active_object.data.materials.append(diffuse_material("wall", (WALL["reflectance"],) * 3))
-
-
-def light(scene, name, settings, centre):
-    """An area light facing the head's centre (its irradiance there: the nominal one x the strength, at any
-    distance, as tone_scenes.py), or a sun from that direction."""
-    direction = direction_of(settings["angle"])
-    irradiance = NOMINAL_IRRADIANCE * settings["strength"]
-    if settings["kind"] == "sun":
-        data = bpy.data.lights.new(name, "SUN")
-        data.angle = math.radians(settings["size"])
-        data.energy = irradiance
-        location = centre + 2.0 * direction
-    else:
-        data = bpy.data.lights.new(name, "AREA")
-        data.size = settings["size"]
-        data.energy = irradiance * math.pi * settings["distance"] ** 2
-        location = centre + settings["distance"] * direction
-    data.use_nodes = True
-    tree = data.node_tree
-    tree.links.new(blackbody_node(tree, settings["kelvin"]).outputs["Color"], tree.nodes["Emission"].inputs["Color"])
-    obj = bpy.data.objects.new(name, data)
-    scene.collection.objects.link(obj)
-    obj.location = location
-    obj.rotation_euler = (-direction).to_track_quat("-Z", "Y").to_euler()
-
-
-def environment(scene, settings):
-    world = bpy.data.worlds.new("world")
-    world.use_nodes = True
-    background = world.node_tree.nodes["Background"]
-    background.inputs["Color"].default_value = (*settings["world"], 1.0)
-    background.inputs["Strength"].default_value = settings["world_strength"]
-    scene.world = world
 
 
 def unseen(obj, material):
@@ -371,6 +278,21 @@ def leaves(frame, params=LEAVES):
     unseen(obj, diffuse_material("leaf", (0.05, 0.12, 0.03)))
 
 
+def part(name, shape, size, placement, material):
+    """An unseen part of a hand at ``placement``: a "box" of ``size`` (x, y, z) m, or a "cylinder" along y of
+    ``size`` (radius, length) m."""
+    if shape == "box":
+        bpy.ops.mesh.primitive_cube_add(size=1.0)
+        shape_matrix = Matrix.Diagonal((*size, 1.0))
+    else:  # a cylinder along y
+        bpy.ops.mesh.primitive_cylinder_add(vertices=16, radius=size[0], depth=size[1])
+        shape_matrix = Matrix.Rotation(math.pi / 2, 4, "X")
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.matrix_world = placement @ shape_matrix
+    return unseen(obj, material)
+
+
 def hand(frame):
     """A hand held up between the key light and the face: a palm box and five finger cylinders, in ``frame``
     (z toward the light, y up the fingers)."""
@@ -381,16 +303,7 @@ def hand(frame):
     parts.append(("thumb", "cylinder", (0.055, 0.0, 0.008), (0.01, 0.065), math.radians(-40)))
     for name, shape, location, size, tilt in parts:
         local = Matrix.Translation(location) @ Matrix.Rotation(tilt, 4, "Z")
-        if shape == "box":
-            bpy.ops.mesh.primitive_cube_add(size=1.0)
-            shape_matrix = Matrix.Diagonal((*size, 1.0))
-        else:  # a cylinder along y
-            bpy.ops.mesh.primitive_cylinder_add(vertices=16, radius=size[0], depth=size[1])
-            shape_matrix = Matrix.Rotation(math.pi / 2, 4, "X")
-        obj = bpy.context.active_object
-        obj.name = name
-        obj.matrix_world = frame @ local @ shape_matrix
-        unseen(obj, skin)
+        part(name, shape, size, frame @ local, skin)
 
 
 def blinds(frame):
@@ -419,16 +332,7 @@ def fingers(frame):
         parts.append((tuple(at), turn, "cylinder", (0.0085, length)))
     parts.append(((-0.062, -0.012 - middle, 0.008), math.radians(50), "cylinder", (0.01, 0.065)))
     for i, (location, tilt, shape, size) in enumerate(parts):
-        if shape == "box":
-            bpy.ops.mesh.primitive_cube_add(size=1.0)
-            shape_matrix = Matrix.Diagonal((*size, 1.0))
-        else:  # a cylinder along y
-            bpy.ops.mesh.primitive_cylinder_add(vertices=16, radius=size[0], depth=size[1])
-            shape_matrix = Matrix.Rotation(math.pi / 2, 4, "X")
-        obj = bpy.context.active_object
-        obj.name = f"hand{i}"
-        obj.matrix_world = frame @ Matrix.Translation(location) @ Matrix.Rotation(tilt, 4, "Z") @ shape_matrix
-        unseen(obj, skin)
+        part(f"hand{i}", shape, size, frame @ Matrix.Translation(location) @ Matrix.Rotation(tilt, 4, "Z"), skin)
 
 
 def brim(centre):
@@ -467,12 +371,12 @@ def occluder(settings, obj, centre):
 def render(out, tone, name, samples):
     settings = SCENES[name]
     scene = reset(samples)
-    obj, centre = face(out / "albedo" / f"{tone}.png")
+    obj, centre = scene_common.face(out / "albedo" / f"{tone}.png")
     camera(scene, centre)
     wall(centre)
-    light(scene, "key", settings["key"], centre)
+    light(scene, "key", centre, **settings["key"])
     if settings["fill"] is not None:
-        light(scene, "fill", settings["fill"], centre)
+        light(scene, "fill", centre, **settings["fill"])
     if settings["occluder"] is not None:
         occluder(settings, obj, centre)
     environment(scene, settings)
@@ -485,7 +389,7 @@ def render(out, tone, name, samples):
 def patch_pixels(out, tone):
     """Where the skin patches of :data:`PATCHES` are in every render, as fractions (x right, y up)."""
     scene = reset(1)
-    obj, centre = face(out / "albedo" / f"{tone}.png")
+    obj, centre = scene_common.face(out / "albedo" / f"{tone}.png")
     cam = camera(scene, centre)
     bpy.context.view_layer.update()
     return {name: world_to_camera_view(scene, cam, surface_point(obj, centre, offset))

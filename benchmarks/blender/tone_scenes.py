@@ -26,10 +26,11 @@ from pathlib import Path
 
 import bpy
 from bpy_extras.object_utils import world_to_camera_view
-from mathutils import Vector
 
-SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
-MESH = SHARED / "detail-synth" / "mesh.obj"
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # Blender runs this file directly: find scene_common
+import scene_common  # noqa: E402
+from scene_common import SHARED, diffuse_material  # noqa: E402
+
 ALBEDO = SHARED / "skin-tone-synth" / "albedo"
 TONES = ("ita50", "ita30", "ita10", "ita-10", "ita-30")
 
@@ -55,8 +56,6 @@ SCENES = {
                       wall=(0.25, 0.4, 0.22), wall_distance=0.9, world=(0.7, 1.0, 0.6), world_strength=0.18),
 }
 SPLIT = {name: ("tune" if i % 2 == 0 else "report") for i, name in enumerate(SCENES)}
-NOMINAL_IRRADIANCE = 3.0
-"""W/m^2 of the key light at the face at strength 1: the lit cheek of a light skin near sRGB 200 at exposure 1."""
 
 
 def arguments():
@@ -70,71 +69,10 @@ def arguments():
         options["--variants"].split(",")
 
 
-def blackbody_node(tree, kelvin):
-    node = tree.nodes.new("ShaderNodeBlackbody")
-    node.inputs["Temperature"].default_value = kelvin
-    return node
-
-
 def reset(samples):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = samples
-    scene.cycles.use_denoising = "OPENIMAGEDENOISE" in dir(bpy.app.build_options) and \
-        bpy.app.build_options.openimagedenoise
-    scene.render.resolution_x = scene.render.resolution_y = 512
-    scene.render.resolution_percentage = 100
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-    scene.view_settings.exposure = 0.0
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
-    scene.render.image_settings.color_mode = "RGB"
-    return scene
-
-
-def face(albedo_path):
-    bpy.ops.wm.obj_import(filepath=str(MESH), forward_axis="NEGATIVE_Z", up_axis="Y")
-    obj = bpy.context.selected_objects[0]
-    obj.scale = (0.01, 0.01, 0.01)
-    bpy.ops.object.transform_apply(scale=True)
-    bpy.ops.object.shade_smooth()
-    material = bpy.data.materials.new("skin")
-    material.use_nodes = True
-    bsdf = material.node_tree.nodes["Principled BSDF"]
-    bsdf.inputs["Subsurface"].default_value = 0.0
-    if albedo_path is None:  # the white variant: uniform 80 %, no specular
-        bsdf.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1.0)
-        bsdf.inputs["Specular"].default_value = 0.0
-    else:
-        texture = material.node_tree.nodes.new("ShaderNodeTexImage")
-        texture.image = bpy.data.images.load(str(albedo_path))
-        material.node_tree.links.new(texture.outputs["Color"], bsdf.inputs["Base Color"])
-        bsdf.inputs["Specular"].default_value = 0.35
-    bsdf.inputs["Roughness"].default_value = 0.45
-    obj.data.materials.clear()
-    obj.data.materials.append(material)
-    corners = [obj.matrix_world @ Vector(c) for c in obj.bound_box]
-    return obj, sum(corners, Vector()) / 8
-
-
-def diffuse_material(name, colour, image=None):
-    material = bpy.data.materials.new(name)
-    material.use_nodes = True
-    tree = material.node_tree
-    tree.nodes.remove(tree.nodes["Principled BSDF"])
-    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
-    if image is not None:
-        texture = tree.nodes.new("ShaderNodeTexImage")
-        texture.image = bpy.data.images.load(str(image))
-        texture.interpolation = "Closest"
-        tree.links.new(texture.outputs["Color"], diffuse.inputs["Color"])
-    else:
-        diffuse.inputs["Color"].default_value = (*colour, 1.0)
-    tree.links.new(diffuse.outputs["BSDF"], tree.nodes["Material Output"].inputs["Surface"])
-    return material
+    """32-bit OpenEXR, denoised when this Blender has OpenImageDenoise."""
+    denoise = "OPENIMAGEDENOISE" in dir(bpy.app.build_options) and bpy.app.build_options.openimagedenoise
+    return scene_common.reset(samples, "OPEN_EXR", "32", denoise)
 
 
 def plane(name, size, location, material):
@@ -148,39 +86,16 @@ def plane(name, size, location, material):
 
 def build(scene, settings, centre, variant, out):
     """Camera, wall, key light, environment and the variant's card; returns the card's or checker's box."""
-    camera_data = bpy.data.cameras.new("camera")
-    camera_data.lens, camera_data.sensor_width = 85.0, 36.0
-    camera = bpy.data.objects.new("camera", camera_data)
-    scene.collection.objects.link(camera)
-    camera.location = (centre.x, centre.y - 1.1, centre.z)
-    camera.rotation_euler = (math.pi / 2, 0.0, 0.0)
-    scene.camera = camera
+    camera = scene_common.camera(scene, centre)
     wall = settings["wall"]
     if wall is not None:
         colour = (wall,) * 3 if isinstance(wall, float) else wall
         plane("wall", (4.0, 4.0), (centre.x, centre.y + settings["wall_distance"], centre.z),
               diffuse_material("wall", colour))
-    azimuth, elevation = (math.radians(a) for a in settings["key"])
-    direction = Vector((math.sin(azimuth) * math.cos(elevation), -math.cos(azimuth) * math.cos(elevation),
-                        math.sin(elevation)))
-    light_data = bpy.data.lights.new("key", "AREA")
-    light_data.size = settings["size"]
-    # Irradiance of a small area light facing the face: power / (pi d^2) (Lambertian emitter), i.e. the nominal
-    # irradiance times the strength at any distance: the distance changes the fall-off and the shadow, not the level.
-    light_data.energy = NOMINAL_IRRADIANCE * settings["strength"] * math.pi * settings["distance"] ** 2
-    light_data.use_nodes = True
-    tree = light_data.node_tree
-    tree.links.new(blackbody_node(tree, settings["kelvin"]).outputs["Color"], tree.nodes["Emission"].inputs["Color"])
-    light = bpy.data.objects.new("key", light_data)
-    scene.collection.objects.link(light)
-    light.location = centre + settings["distance"] * direction
-    light.rotation_euler = (-direction).to_track_quat("-Z", "Y").to_euler()
-    world = bpy.data.worlds.new("world")
-    world.use_nodes = True
-    background = world.node_tree.nodes["Background"]
-    background.inputs["Color"].default_value = (*settings["world"], 1.0)
-    background.inputs["Strength"].default_value = settings["world_strength"]
-    scene.world = world
+    scene_common.light(scene, "key", centre, settings["key"], settings["size"], settings["distance"],
+                       settings["kelvin"], settings["strength"])
+    scene_common.environment(scene, settings)
+    azimuth = math.radians(settings["key"][0])
     if variant == "card":
         card = plane("card", (0.09, 0.09), (centre.x + 0.15 * _side(azimuth), centre.y - 0.02, centre.z - 0.04),
                      diffuse_material("card", (0.18, 0.18, 0.18)))
@@ -217,7 +132,7 @@ def main():
                 if (out / "exr" / f"{stem}.exr").exists():
                     continue
                 scene = reset(samples)
-                _, centre = face(None if variant == "white" else ALBEDO / f"{tone}.png")
+                _, centre = scene_common.face(None if variant == "white" else ALBEDO / f"{tone}.png")
                 box = build(scene, settings, centre, variant, out)
                 scene.render.filepath = str(out / "exr" / f"{stem}.exr")
                 bpy.ops.render.render(write_still=True)
