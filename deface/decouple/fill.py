@@ -44,7 +44,7 @@ def fill_from_evidence(masks: torch.Tensor, evidence: torch.Tensor, sigma: float
     evidence-weighted mean of the masks within a Gaussian of ``sigma`` pixels (the module doc). With ``near`` > 0
     only pixels with little evidence within a Gaussian of ``near`` pixels are blended (:func:`far_from_evidence`):
     a beard's inside, not the thin band along a shadow's edge, whose masks f fits from the skin either side."""
-    around = _evidence_mean(masks, evidence, sigma)[0]
+    around = _evidence_mean(masks, evidence, sigma)
     share = (1.0 - evidence) * far_from_evidence(evidence, near) if near > 0 else 1.0 - evidence
     return masks + share * (around - masks)
 
@@ -59,8 +59,8 @@ def far_from_evidence(evidence: torch.Tensor, near: float) -> torch.Tensor:
     return 1.0 - (density / DENSE).clamp(max=1.0)
 
 
-def _evidence_mean(masks: torch.Tensor, evidence: torch.Tensor, sigma: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """The evidence-weighted mean [K, H, W] of ``masks`` within a Gaussian of ``sigma`` pixels, and that
-    Gaussian's share of evidence [H, W] (normalised convolution)."""
+def _evidence_mean(masks: torch.Tensor, evidence: torch.Tensor, sigma: float) -> torch.Tensor:
+    """The evidence-weighted mean [K, H, W] of ``masks`` within a Gaussian of ``sigma`` pixels (normalised
+    convolution)."""
     weighted = gaussian_blur(torch.cat([masks * evidence, evidence[None]]), sigma)
-    return (weighted[:-1] + NO_EVIDENCE * masks) / (weighted[-1:] + NO_EVIDENCE), weighted[-1]
+    return (weighted[:-1] + NO_EVIDENCE * masks) / (weighted[-1:] + NO_EVIDENCE)

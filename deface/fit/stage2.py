@@ -74,7 +74,8 @@ def run_stage2(context: StageContext) -> Stage2Result:
 
 def _weighted_by_evidence(context: StageContext) -> StageContext:
     """Stage 2's context whose face region h is weighted by how much each pixel tells about the shading
-    (deface/priors/shading_evidence.py); the same context when that is off. Stage 3 keeps h itself."""
+    (deface/priors/shading_evidence.py); the same context when that is off. Stage 3 keeps h itself. The weighted
+    h is also handed to the decoupling, whose masks it fills with ``decouple.mask_fill``."""
     evidence = context.config.shading_evidence
     if evidence.strength <= 0:
         return context
