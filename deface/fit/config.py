@@ -201,8 +201,13 @@ class LearningRates:
 
     lights: float = 0.007
     """Stage 2: the SH light coefficients."""
-    light_masks: float = 0.007
-    """Stage 2: the light-mask field f."""
+    light_masks: float = 0.002
+    """Stage 2: the light-mask field f. The authors' 0.007 is for their f on raw (x, y, t); with the Fourier
+    features (``decouple.fourier_frequencies``) f has nine times the inputs and Adam moves every weight by about
+    its step, so at 0.007 f was the fastest way to change the whole render's level: in the first dozen steps it
+    gave every pixel to one light, its softmax saturated, and ACE kept that light alone, baking blinds and a
+    slanted brim into the map. At 0.002 the lights move first (docs/textures.md "One light for the whole
+    face")."""
     face_region: float = 0.007
     """Stage 2: the face-region field g."""
     identity: float = 0.01
@@ -500,6 +505,7 @@ PAPER = {
     "skin_classifier.beard_zone": False,
     "skin_classifier.hull_margin": 0.0,
     "shading_evidence.strength": 0.0,
+    "learning_rates.light_masks": 0.007,
 }
 """The paper's method (Table 6 and the authors' code) where the shipped method, FitConfig's defaults, departs
 from it (each field's docstring says why). These were FitConfig's defaults until issue 41, so a params.json
