@@ -10,6 +10,7 @@ import torch
 
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import (
+    colour_spread,
     exposure_term,
     front_directions,
     key_light_level,
@@ -279,3 +280,21 @@ def test_terms_vanish_at_the_estimate_and_pull_towards_it():
     assert float(level) == pytest.approx(float(white @ torch.tensor([0.2126, 0.7152, 0.0722])), rel=1e-4)
     assert float(exposure_term(level, float(level))) == pytest.approx(0.0, abs=1e-10)
     assert float(exposure_term(level * 2, float(level))) == pytest.approx(math.log(2) ** 2, rel=1e-3)
+
+
+def test_colour_spread_is_zero_for_one_colour_and_grows_with_a_tinted_lobe():
+    """One colour in every direction costs nothing whatever its level; a light bluer to one side costs, and
+    a gradient step on the spread makes its colour more uniform."""
+    directions = front_directions()
+    warm = white_light(3) * torch.tensor([1.2, 1.0, 0.7])
+    assert float(colour_spread(warm, directions)) == pytest.approx(0.0, abs=1e-8)
+    assert float(colour_spread(warm * 3.0, directions)) == pytest.approx(0.0, abs=1e-8)
+    tinted = warm.clone()
+    tinted[0, 1:3, 2] += 0.4  # blue on two of the linear (l = 1) terms: bluer towards one side
+    spread = colour_spread(tinted, directions)
+    assert float(spread) > 1e-3
+    assert float(colour_spread(tinted * 2.0, directions)) == pytest.approx(float(spread), rel=1e-4)  # level-free
+    lights = tinted.clone().requires_grad_(True)
+    colour_spread(lights, directions).backward()
+    stepped = (lights - 0.05 * lights.grad).detach()
+    assert float(colour_spread(stepped, directions)) < float(spread)

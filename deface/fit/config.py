@@ -138,6 +138,12 @@ class Weights:
     """w7: HP, FaceNet identity confidence (stage 3)."""
     sh_regulariser: float = 1e-4
     """mean(SH^2) in stage 2 (authors' code)."""
+    light_colour_spread: float = 0.0
+    """Stages 2 and 3: how much a light's colour may change with direction
+    (:func:`deface.losses.illuminant.colour_spread`, the variance of its log-chromaticity over the front
+    hemisphere). Free RGB SH coefficients let one light be neutral facing the camera and blue or yellow facing
+    down; the map then takes the opposite colour where such a normal is (under the brows, along a mask's edge).
+    0 = off."""
     albedo_prior: float = 1.0
     """mean(delta^2) of the albedo-model coefficients in stage 2."""
     identity_prior: float = 1e-3

@@ -11,7 +11,7 @@ import torch
 
 from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, StageContext
-from deface.losses.illuminant import scene_light_colour_loss, scene_light_level_loss
+from deface.losses.illuminant import colour_spread, front_directions, scene_light_colour_loss, scene_light_level_loss
 from deface.losses.photometric import photometric_loss
 from deface.render.frame import FrameCast, render_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
@@ -81,6 +81,14 @@ def scene_light_colour(context: StageContext) -> torch.Tensor:
         return torch.zeros(())
     lights = context.scene.lights[context.decoupling.kept]
     return scene_light_colour_loss(lights, light.illuminant.white, tone.weight, tone.colour_sigma)
+
+
+def light_colour_spread(context: StageContext) -> torch.Tensor:
+    """How much the kept lights' colours change with direction, weighted (0 when off)."""
+    weight = context.config.weights.light_colour_spread
+    if weight <= 0:
+        return torch.zeros(())
+    return weight * colour_spread(context.scene.lights[context.decoupling.kept], front_directions())
 
 
 def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:

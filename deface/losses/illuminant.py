@@ -69,6 +69,21 @@ def light_colour_term(lights: torch.Tensor, white: torch.Tensor, directions: tor
     return (share * chroma.pow(2).sum(-1)).sum() / share.sum().clamp_min(1e-6)
 
 
+def colour_spread(lights: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+    """How much each light's colour changes with direction: the variance of the log-chromaticity of its white
+    response over ``directions`` [N, 3], each direction weighted by its luminance as a share of the light's
+    brightest (dark directions colour little), mean over the lights [K, B*B, 3]. 0 for a light of one colour."""
+    response = white_response(lights, directions)  # [K, N, 3]
+    luminance = response @ torch.as_tensor(LUMINANCE, dtype=response.dtype)  # [K, N]
+    weight = (luminance / luminance.max(1, keepdim=True).values.clamp_min(1e-6)).clamp(0, 1).detach()
+    log_response = torch.log(_positive(response))
+    chroma = log_response - log_response.mean(-1, keepdim=True)  # [K, N, 3]
+    total = weight.sum(1).clamp_min(1e-6)  # [K]
+    mean = (weight[..., None] * chroma).sum(1) / total[:, None]  # [K, 3]
+    spread = (weight * (chroma - mean[:, None]).pow(2).sum(-1)).sum(1) / total  # [K]
+    return spread.mean()
+
+
 def key_light_level(lights: torch.Tensor, normals: torch.Tensor, region: torch.Tensor,
                     quantile: float = KEY_QUANTILE) -> torch.Tensor:
     """The brightest light's level on the face: the ``quantile`` over the pixels ``region`` [H, W] (bool) of
