@@ -18,22 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from deface.eval import albedo_measures as measures
-from deface.eval.albedo_benchmark import read_truth_set, region_masks, shown_texels
+from deface.eval.albedo_benchmark import photo_in_uv, read_truth_set, region_masks, shown_texels
 from deface.export.load import load_fit
 from deface.io.images import load_image, srgb_to_linear
 from deface.models.ict_build import read_obj
-from deface.models.uvmap import rasterize_uv
-from deface.texture.confidence import texel_view, unwrap
 
 REGIONS = ("beard", "freckle_area")
-
-
-def photo_in_uv(fit) -> tuple[np.ndarray, np.ndarray]:
-    """The first frame's working photo (linear) read at each texel of a 256² map [S, S, 3], and where it is seen."""
-    frame = fit.frames[0]
-    raster = rasterize_uv(fit.model.uvs, fit.model.triangle_uvs, measures.SCORE_SIZE)
-    view = texel_view(raster, frame.geometry.mesh, frame.geometry.camera)
-    return unwrap(srgb_to_linear(frame.photo_srgb).astype(np.float64), view), view.visible
 
 
 def main() -> None:
@@ -50,12 +40,12 @@ def main() -> None:
             if not (folder / "params.json").is_file():
                 continue
             fit = load_fit(folder)
-            photo, visible = photo_in_uv(fit)
-            shown = shown_texels(fit, truth_mesh) & visible
+            photo = photo_in_uv(fit)
+            shown = shown_texels(fit, truth_mesh) & np.isfinite(photo).all(-1)
             truth = measures.at_score_size(srgb_to_linear(load_image(args.truth / "albedo" / render.albedo))
                                            .astype(np.float64))
             scores = json.loads((folder / "scores.json").read_text())["scores"]
-            cells = [f"{name} photo {measures.fine_structure(photo, truth, masks[name] & shown):5.2f} "
+            cells = [f"{name} photo {measures.fine_structure(np.nan_to_num(photo), truth, masks[name] & shown):5.2f} "
                      f"map {scores.get(name, {}).get('fine_structure', float('nan')):5.2f}" for name in REGIONS]
             size = "x".join(map(str, fit.framing.size))
             print(f"  {render.stem:12s} working {size:9s} " + " | ".join(cells))

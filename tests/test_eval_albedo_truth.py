@@ -84,6 +84,23 @@ def test_score_fit_regions_and_reference():
     assert scores["beard"]["texels"] == REGION.sum()
 
 
+def test_score_fit_photo_darkness_tells_the_photo_from_the_map():
+    truth = _skin()
+    truth[REGION] *= 0.5
+    photo = truth * 0.7  # the photo: the truth under an even light, so it keeps the beard whole
+    photo[:5] = np.nan  # rows the photo does not see
+    bleached = _skin()
+    scores = score_fit(bleached, truth, np.ones((S, S), bool), {"forehead": REFERENCE, "beard": REGION}, photo)
+    assert scores["beard"]["photo_darkness"] == pytest.approx(1.0)
+    assert scores["beard"]["darkness_kept"] == pytest.approx(0.0)  # the lights took it, not the photo
+    shaded = photo.copy()
+    shaded[REGION] *= 1.6  # the region lit brighter than the reference: the photo shows it lighter
+    scores = score_fit(bleached, truth, np.ones((S, S), bool), {"forehead": REFERENCE, "beard": REGION}, shaded)
+    assert scores["beard"]["photo_darkness"] == pytest.approx((1 - 0.8) / 0.5)
+    assert "photo_darkness" not in score_fit(bleached, truth, np.ones((S, S), bool),
+                                             {"forehead": REFERENCE, "beard": REGION})["beard"]
+
+
 def test_similarity_aligned_recovers_a_similarity():
     rng = np.random.default_rng(4)
     target = rng.standard_normal((50, 3))

@@ -80,9 +80,12 @@ def region_masks(folder: Path) -> dict[str, np.ndarray]:
             for path in sorted((folder / "masks").glob("*.png"))}
 
 
-def score_fit(fitted: np.ndarray, truth: np.ndarray, shown: np.ndarray, masks: dict[str, np.ndarray]) -> dict:
+def score_fit(fitted: np.ndarray, truth: np.ndarray, shown: np.ndarray, masks: dict[str, np.ndarray],
+              photo: np.ndarray | None = None) -> dict:
     """Every measure of a fitted map against the truth (both linear [S, S, 3] at the score size) over the shown
-    texels ``shown`` [S, S]: {region: {...}} with the whole face under :data:`FACE`."""
+    texels ``shown`` [S, S]: {region: {...}} with the whole face under :data:`FACE`. With ``photo`` (the working
+    photo read in UV, :func:`photo_in_uv`, NaN where unseen) each region also gets the photo's own darkness kept,
+    shading and all: where the photo keeps a region's darkness and the map does not, the fit's lights took it."""
     reference = masks[REFERENCE] & shown if REFERENCE in masks else shown
     matched = measures.gain_matched(fitted, truth, reference)
     psnr, ssim = measures.psnr_ssim(matched, truth, shown)
@@ -95,7 +98,26 @@ def score_fit(fitted: np.ndarray, truth: np.ndarray, shown: np.ndarray, masks: d
         scores[name] = {"darkness_kept": measures.darkness_kept(matched, truth, region, reference),
                         "fine_structure": measures.fine_structure(matched, truth, region),
                         "texels": int(region.sum())}
+        if photo is not None:
+            seen = np.isfinite(photo).all(-1)
+            photo_matched = measures.gain_matched(np.nan_to_num(photo), truth, reference & seen)
+            scores[name]["photo_darkness"] = measures.darkness_kept(photo_matched, truth, region & seen,
+                                                                     reference & seen)
     return scores
+
+
+def photo_in_uv(result, size: int = measures.SCORE_SIZE) -> np.ndarray:
+    """The fit's first working photo (linear) read at each texel of a ``size``² map through the fitted mesh and
+    camera [S, S, 3], NaN where that frame does not see the texel."""
+    from deface.io.images import srgb_to_linear
+    from deface.models.uvmap import rasterize_uv
+    from deface.texture.confidence import texel_view, unwrap
+
+    frame = result.frames[0]
+    raster = rasterize_uv(result.model.uvs, result.model.triangle_uvs, size)
+    view = texel_view(raster, frame.geometry.mesh, frame.geometry.camera)
+    photo = unwrap(srgb_to_linear(frame.photo_srgb).astype(np.float64), view)
+    return np.where(view.visible[..., None], photo, np.nan)
 
 
 def shown_texels(result, truth_mesh: np.ndarray | None, size: int = measures.SCORE_SIZE) -> np.ndarray:
@@ -157,7 +179,7 @@ def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_
     reference = masks[REFERENCE] & shown if REFERENCE in masks else shown
     matched = measures.gain_matched(fitted, truth, reference)
     save_png(result_dir / "albedo_difference.png", measures.difference_image(matched, truth, shown), srgb=False)
-    return {"scores": score_fit(fitted, truth, shown, masks), "seconds": seconds,
+    return {"scores": score_fit(fitted, truth, shown, masks, photo_in_uv(result)), "seconds": seconds,
             "light": render.light, "kept_lights": len(result.lights.kept)}
 
 
@@ -199,7 +221,8 @@ def summary(records: dict) -> dict:
 def summary_line(variant: str, figures: dict) -> str:
     """One line of a variant's :func:`summary` for the console."""
     face = figures[FACE]
-    regions = ", ".join(f"{r} kept {v['darkness_kept']:.2f} fine {v['fine_structure']:.2f}"
+    regions = ", ".join(f"{r} kept {v['darkness_kept']:.2f} (photo {v.get('photo_darkness', float('nan')):.2f})"
+                        f" fine {v['fine_structure']:.2f}"
                         for r, v in figures.items() if r != FACE)
     return (f"{variant}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}, colour noise "
             f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f}); {regions}")
@@ -214,15 +237,17 @@ def report_markdown(renders: list[TruthRender], records: dict, title: str, comma
     """A section for BENCHMARKS.md: one row per variant and render, the variant's mean last."""
     regions = sorted({r for recs in records.values() for rec in recs.values() for r in rec["scores"]} - {FACE})
     header = ["variant", "render", "light", "PSNR", "SSIM", "colour noise (truth)"]
-    header += [f"{r} {m}" for r in regions for m in ("kept", "fine")]
+    header += [f"{r} {m}" for r in regions for m in ("kept", "photo", "fine")]
     lines = [f"## Albedo against the truth: {title}", "", f"Regenerate: `{command}`", "",
              "The fitted diffuse map against the true albedo in UV at 256², over the texels the render shows (the"
              f" true surface within {MAX_ANGLE:.0f} degrees of facing the fitted camera), after one gain per channel"
              f" matched on the {REFERENCE} (deface/eval/albedo_measures.py). PSNR/SSIM of the sRGB maps; colour noise:"
              " RMS chroma of the map's fine structure x100 (the truth's in brackets); kept: darkness kept,"
              " (1 - K_fit) / (1 - K_truth), K = the region's luminance over the reference's (1 = as dark as the"
-             " truth, 0 = bleached to skin); fine: correlation of the fine luminance (minus a Gaussian of 2 texels)"
-             " with the truth's.", "",
+             " truth, 0 = bleached to skin); photo: the same of the working photo read into UV through the fitted mesh,"
+             " shading and all (about 1 or more where the photo shows the region dark; a map's kept well below its"
+             " photo's means the fit's lights took the darkness); fine: correlation of the fine luminance (minus a"
+             " Gaussian of 2 texels) with the truth's.", "",
              "| " + " | ".join(header) + " |", "|---" * len(header) + "|"]
     for variant, recs in records.items():
         rows = [(render.stem, render.light, recs[render.stem]["scores"]) for render in renders]
@@ -233,7 +258,7 @@ def report_markdown(renders: list[TruthRender], records: dict, title: str, comma
                      f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f})"]
             for region in regions:
                 values = scores.get(region, {})
-                cells += [_cell(values.get("darkness_kept")), _cell(values.get("fine_structure"))]
+                cells += [_cell(values.get(m)) for m in ("darkness_kept", "photo_darkness", "fine_structure")]
             lines.append("| " + " | ".join(cells) + " |")
     lines.append(f"\n_Written {time.strftime('%Y-%m-%d %H:%M')}._")
     return "\n".join(lines) + "\n"
