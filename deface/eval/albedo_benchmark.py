@@ -91,6 +91,9 @@ def score_fit(fitted: np.ndarray, truth: np.ndarray, shown: np.ndarray, masks: d
     psnr, ssim = measures.psnr_ssim(matched, truth, shown)
     scores = {FACE: {"psnr": psnr, "ssim": ssim, "colour_noise": measures.colour_noise(matched, shown),
                      "colour_noise_truth": measures.colour_noise(truth, shown), "texels": int(shown.sum())}}
+    if photo is not None:
+        seen = np.isfinite(photo).all(-1)
+        photo_matched = measures.gain_matched(np.nan_to_num(photo), truth, reference & seen)
     for name, mask in masks.items():
         region = mask & shown
         if name == REFERENCE or region.sum() < 4:
@@ -99,8 +102,6 @@ def score_fit(fitted: np.ndarray, truth: np.ndarray, shown: np.ndarray, masks: d
                         "fine_structure": measures.fine_structure(matched, truth, region),
                         "texels": int(region.sum())}
         if photo is not None:
-            seen = np.isfinite(photo).all(-1)
-            photo_matched = measures.gain_matched(np.nan_to_num(photo), truth, reference & seen)
             scores[name]["photo_darkness"] = measures.darkness_kept(photo_matched, truth, region & seen,
                                                                      reference & seen)
     return scores
