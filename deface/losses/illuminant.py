@@ -57,14 +57,19 @@ def _positive(values: torch.Tensor) -> torch.Tensor:
     return torch.nn.functional.softplus(values * SHARPNESS) / SHARPNESS + 1e-6
 
 
+def _log_chromaticity(rgb: torch.Tensor) -> torch.Tensor:
+    """[..., 3] log of each channel less their mean: the colour without its level (positive-clamped first)."""
+    log_rgb = torch.log(_positive(rgb))
+    return log_rgb - log_rgb.mean(-1, keepdim=True)
+
+
 def light_colour_term(lights: torch.Tensor, white: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
     """Squared log-chromaticity distance of kept lights [K, B*B, 3] from ``white`` [3], weighted by each
     light's share of the brightest light's peak luminance."""
     peak = peak_white(lights, directions)  # [K, 3]
     luminance = peak @ torch.as_tensor(LUMINANCE, dtype=peak.dtype)
     target = torch.log(white.to(peak.dtype))
-    log_peak = torch.log(_positive(peak))
-    chroma = (log_peak - log_peak.mean(-1, keepdim=True)) - (target - target.mean())
+    chroma = _log_chromaticity(peak) - (target - target.mean())
     share = (luminance / luminance.max().clamp_min(1e-6)).clamp(0, 1).detach()
     return (share * chroma.pow(2).sum(-1)).sum() / share.sum().clamp_min(1e-6)
 
@@ -76,8 +81,7 @@ def colour_spread(lights: torch.Tensor, directions: torch.Tensor) -> torch.Tenso
     response = white_response(lights, directions)  # [K, N, 3]
     luminance = response @ torch.as_tensor(LUMINANCE, dtype=response.dtype)  # [K, N]
     weight = (luminance / luminance.max(1, keepdim=True).values.clamp_min(1e-6)).clamp(0, 1).detach()
-    log_response = torch.log(_positive(response))
-    chroma = log_response - log_response.mean(-1, keepdim=True)  # [K, N, 3]
+    chroma = _log_chromaticity(response)  # [K, N, 3]
     total = weight.sum(1).clamp_min(1e-6)  # [K]
     mean = (weight[..., None] * chroma).sum(1) / total[:, None]  # [K, 3]
     spread = (weight * (chroma - mean[:, None]).pow(2).sum(-1)).sum(1) / total  # [K]
