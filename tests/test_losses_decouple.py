@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from deface.losses.decouple import area_loss, binary_loss, segmentation_loss
+from deface.losses.decouple import area_loss, binary_loss, segmentation_loss, variation_loss
 from deface.losses.photometric import blur3, gaussian_kernel3, photometric_loss
 
 
@@ -55,6 +55,45 @@ def test_losses_accept_frames_and_give_gradients():
     loss = area_loss(masks, torch.ones(2, 4, 4)) + binary_loss(masks, torch.ones(2, 4, 4), "paper")
     loss.backward()
     assert logits.grad.abs().sum() > 0
+
+
+def _square_inside(side: int, square: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Two masks over a face (the middle 80 % of a ``side``² image) split by a square of light 1 at
+    [square[0], square[1]) in both axes, and the face's coverage."""
+    coverage = torch.zeros(side, side)
+    edge = side // 10
+    coverage[edge:side - edge, edge:side - edge] = 1.0
+    masks = torch.stack([coverage.clone(), torch.zeros(side, side)])
+    start, stop = square
+    masks[0, start:stop, start:stop] = 0.0
+    masks[1, start:stop, start:stop] = 1.0
+    return masks, coverage
+
+
+def test_variation_loss_is_the_masks_perimeter_over_the_face_size():
+    uniform, coverage = _square_inside(100, (0, 0))
+    assert variation_loss(uniform, coverage).item() == 0.0  # the face's own outline is M_R's, not a mask's
+    masks, coverage = _square_inside(100, (30, 50))
+    # a 20-pixel square: perimeter 80 in each of the two masks, over sqrt(80 * 80)
+    assert variation_loss(masks, coverage).item() == pytest.approx(2 * 80 / 80)
+
+
+def test_variation_loss_does_not_depend_on_the_working_size():
+    small = variation_loss(*_square_inside(100, (30, 50)))
+    large = variation_loss(*_square_inside(200, (60, 100)))
+    assert large.item() == pytest.approx(small.item())
+
+
+def test_variation_loss_is_the_same_for_a_hard_and_a_ramped_edge_of_one_height():
+    """Total variation pays for the step's height, not its sharpness: a shadow's edge costs the same sharp
+    or soft, so the term does not blur it."""
+    coverage = torch.ones(1, 40)
+    hard = torch.zeros(2, 1, 40)
+    hard[0, 0, :20] = 1.0
+    hard[1] = 1.0 - hard[0]
+    ramp = torch.clamp(torch.linspace(1.5, -0.5, 40), 0.0, 1.0)
+    soft = torch.stack([ramp, 1.0 - ramp])[:, None, :]
+    assert variation_loss(soft, coverage).item() == pytest.approx(variation_loss(hard, coverage).item(), rel=1e-5)
 
 
 def test_segmentation_loss_both_forms_by_hand():

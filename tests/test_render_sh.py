@@ -111,3 +111,20 @@ def test_non_negative_keeps_a_positive_light_and_clamps_a_negative_lobe():
     assert torch.corrcoef(torch.stack([before[away], after[away]]))[0, 1] > 0.95
     clamped = non_negative(lobe.double().requires_grad_())
     clamped.sum().backward()  # differentiable
+
+
+def test_the_reports_lit_sphere_shows_the_light_as_rendered():
+    """A light whose radiance is negative around +z renders (clamped) as a light from the sides; its picture in
+    report.html must show that, not the raw SH's negative irradiance (a black sphere)."""
+    from deface.render.renderer import RenderConfig, Renderer
+    from deface.report.html import lit_sphere
+
+    lobe = torch.zeros(1, 81, 3)
+    lobe[0, 0] = 1.0
+    lobe[0, 2] = -1.0  # radiance 0.28 - 0.49 z: negative above z = 0.58, its raw irradiance at +z too
+    size = 33
+    centre = (size // 2, size // 2)
+    raw = lit_sphere(Renderer(RenderConfig(non_negative_lights=False)).rendered_lights(lobe)[0], size=size)
+    shown = lit_sphere(Renderer(RenderConfig()).rendered_lights(lobe)[0], size=size)
+    assert raw[centre][:3].max() == 0.0  # the raw lobe's irradiance facing +z is negative: clipped to black
+    assert shown[centre][:3].min() > 0.01  # as rendered, light reaches it from around the horizon

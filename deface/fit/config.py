@@ -130,6 +130,10 @@ class Weights:
     """w3: L_area of the light masks."""
     binary: float = 25.0
     """w4: L_bin (light masks pushed to 0 or 1)."""
+    mask_variation: float = 0.0
+    """Stage 2: L_var, the light masks' total variation over the face's size (deface/losses/decouple.py): an
+    outline costs its length, so where the photo says nothing of the shading (a beard, stage 2's evidence near 0)
+    a mask takes the light of the skin around rather than drawing the pigment's outline. 0 = off (the paper)."""
     global_prior: float = 2e3
     """w5: GP, the K-means palette prior (stage 3)."""
     local_prior: float = 2.0

@@ -160,6 +160,9 @@ def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, 
         else:
             total = total + terms.add("binary", weights.binary * decouple_losses.binary_loss(
                 rendered.light_masks, rendered.coverage, form=form), scale)
+        if weights.mask_variation > 0:
+            total = total + terms.add("mask_variation", weights.mask_variation * decouple_losses.variation_loss(
+                rendered.light_masks, rendered.coverage), scale)
     return total
 
 

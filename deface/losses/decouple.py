@@ -17,6 +17,12 @@ L_bin: as L_area with mean_k m(p) replaced by the light's own area a_k:
 - ``"paper"``: a_k = sum_p M_R m_k / N (same N as above); exp(-|m_k - a_k|), averaged over the n_L kept
   lights.
 
+L_var (not in the paper; ``weights.mask_variation``): the light masks' total variation over the face,
+sum_p sum_k |grad m_k(p)| over pixel pairs both inside M_R, over sqrt(|M_R|): a mask region's perimeter over the
+face's size, so one weight serves every working size. A cast shadow's edge is paid for once by the photo's evidence
+either side of it; an outline drawn around pigment where stage 2's photometric term has no evidence (a beard) is
+paid for and brings nothing.
+
 L_seg
 - ``"code"``: sum_p (M_R g - h)^2 / sum_p h.
 - ``"paper"`` (Eq. 3): ||g - h||_2 / |I| (the L2 norm over all pixels, not squared, over the pixel count).
@@ -61,6 +67,19 @@ def binary_loss(
     area_normaliser = "render_mask" if form == "code" else normaliser
     areas = (masks * coverage[:, None]).sum(dim=(0, 2, 3)) / area_denominator(coverage, area_normaliser)  # [n]
     return _spread_loss(masks, coverage, areas[None, :, None, None], form, normaliser)
+
+
+def variation_loss(light_masks: torch.Tensor, coverage: torch.Tensor) -> torch.Tensor:
+    """L_var (scalar) of masks [T, n, H, W] (or [n, H, W], already times M_R) under coverage [T, H, W]."""
+    masks, coverage = as_frames(light_masks, coverage)
+    values = masks / coverage[:, None].clamp_min(1e-6)  # f itself: M_R's own edge is not a mask's
+    total = masks.new_zeros(())
+    for axis in (2, 3):
+        inside = coverage.narrow(axis - 1, 1, coverage.shape[axis - 1] - 1) * \
+            coverage.narrow(axis - 1, 0, coverage.shape[axis - 1] - 1)
+        steps = values.diff(dim=axis).abs().sum(dim=1)  # [T, H', W']
+        total = total + (inside * steps).sum()
+    return total / area_denominator(coverage, "render_mask").sqrt()
 
 
 def segmentation_loss(

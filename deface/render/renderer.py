@@ -211,6 +211,11 @@ class Renderer:
         )
 
     # -- shading ----------------------------------------------------------------------------------
+    def rendered_lights(self, sh_lights: torch.Tensor) -> torch.Tensor:
+        """The SH lights [K, B², 3] as :meth:`shade` renders them (negative radiance clamped when
+        ``non_negative_lights``): what a picture of a light must show."""
+        return non_negative(sh_lights) if self.config.non_negative_lights else sh_lights
+
     def shade(
         self,
         mesh: Mesh,
@@ -222,8 +227,7 @@ class Renderer:
     ) -> RenderOutput:
         """Shade covered pixels under every light ``sh_lights`` [K, B², 3]; ``transfer`` None = no shadows."""
         camera = camera.resolved()
-        if self.config.non_negative_lights:
-            sh_lights = non_negative(sh_lights)
+        sh_lights = self.rendered_lights(sh_lights)
         bands = _bands_of(sh_lights)
         num_lights = sh_lights.shape[0]
         height, width = camera.height, camera.width

@@ -50,8 +50,9 @@ table { border-collapse: collapse; font-size: 0.9em; } td, th { border: 1px soli
 
 
 def lit_sphere(light: torch.Tensor, size: int = SPHERE_SIZE, albedo: float = SPHERE_ALBEDO) -> np.ndarray:
-    """[size, size, 4] a grey Lambertian sphere facing the camera (+z) under one SH light [B*B, 3]: linear RGB
-    E(n) / pi * albedo, alpha 1 on the sphere (no shadows: a sphere does not shadow itself)."""
+    """[size, size, 4] a grey Lambertian sphere facing the camera (+z) under one SH light [B*B, 3] (as the
+    renderer renders it: ``Renderer.rendered_lights``): linear RGB E(n) / pi * albedo, alpha 1 on the sphere (no
+    shadows: a sphere does not shadow itself)."""
     bands = int(round(light.shape[0] ** 0.5))
     centre = (torch.arange(size, dtype=torch.float32) + 0.5) / size * 2 - 1
     y, x = torch.meshgrid(-centre, centre, indexing="ij")
@@ -68,7 +69,7 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
     images.mkdir(parents=True, exist_ok=True)
     base = "" if fit.num_frames == 1 else "frames/000/"
     for slot, light in enumerate(fit.lights.kept):
-        save_png(images / f"sphere_{light}.png", lit_sphere(fit.lights.kept_sh[slot]))
+        save_png(images / f"sphere_{light}.png", lit_sphere(fit.renderer.rendered_lights(fit.lights.kept_sh)[slot]))
     neutral = fit.render(lights=white_light(fit.lights.bands))[0]
     save_png(images / "neutral.png", neutral.face.numpy())
     save_png(images / "input.png", fit.frames[0].photo_srgb, srgb=False)
