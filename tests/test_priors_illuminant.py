@@ -298,3 +298,41 @@ def test_colour_spread_is_zero_for_one_colour_and_grows_with_a_tinted_lobe():
     colour_spread(lights, directions).backward()
     stepped = (lights - 0.05 * lights.grad).detach()
     assert float(colour_spread(stepped, directions)) < float(spread)
+
+
+def test_the_level_prior_can_read_the_light_the_renderer_renders():
+    """A fitted SH light may have a negative lobe, which the renderer clamps (render.non_negative_lights). With
+    ``tone.level_as_rendered`` the level term holds the light as rendered: its level facing the camera is the
+    irradiance of the clamped radiance (a Monte Carlo integral here); the raw SH, which the default holds, reads far
+    less (a fit can hold the raw SH at W and render a light twice as bright)."""
+    from types import SimpleNamespace
+
+    from deface.fit import rendering
+    from deface.fit.config import ToneConfig
+    from deface.losses.illuminant import exposure_term
+    from deface.render.renderer import RenderConfig, Renderer
+
+    light = torch.zeros(1, 81, 3)
+    light[0, 0] = 20.0
+    light[0, 2] = -20.0  # radiance 20 (0.28 - 0.49 z): negative towards the camera
+    rng = np.random.default_rng(0)
+    directions = rng.normal(size=(400_000, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    radiance = 20.0 * np.maximum(0.5 / math.sqrt(math.pi) - math.sqrt(3 / (4 * math.pi)) * directions[:, 2], 0.0)
+    # E(+z) / pi = (1 / pi) * integral of L max(cos, 0) over the sphere = 4 * mean(L max(z, 0))
+    rendered_level = 4.0 * float(np.mean(radiance * np.maximum(directions[:, 2], 0.0)))
+
+    def level_term(as_rendered: bool, white: float) -> float:
+        tone = ToneConfig(level_as_rendered=as_rendered)
+        context = SimpleNamespace(
+            config=SimpleNamespace(tone=tone), renderer=Renderer(RenderConfig()),
+            scene=SimpleNamespace(lights=light), decoupling=SimpleNamespace(kept=[0]),
+            inputs=SimpleNamespace(scene_light=SimpleNamespace(regions=[torch.ones(4, 4, dtype=torch.bool)],
+                                                               illuminant=SimpleNamespace(white=np.full(3, white)))))
+        rendered = SimpleNamespace(normals=torch.tensor([0.0, 0.0, 1.0]).expand(4, 4, 3))
+        return float(rendering.scene_light_level(context, 0, rendered))
+
+    expected = ToneConfig().weight * float(exposure_term(torch.tensor(rendered_level), 0.4)) / 0.1**2
+    assert level_term(True, 0.4) == pytest.approx(expected, rel=0.1, abs=1e-3)
+    assert level_term(True, rendered_level) < 0.01  # held where the rendered light is
+    assert level_term(False, rendered_level) > 1.0  # the raw SH's level is far below it

@@ -289,6 +289,12 @@ class ToneConfig:
     """Allowed log-ratio spread of a light's chromaticity around the estimate's."""
     exposure_sigma: float = 0.1
     """Allowed log-ratio spread of the brightest light's white level around the estimate's."""
+    level_as_rendered: bool = False
+    """Read the level term's lights as the renderer renders them (negative radiance clamped,
+    ``render.non_negative_lights``) rather than their raw SH. The raw SH is what the default holds, and the fits
+    evade it: they hold the raw light near W and render one 1.6-2 times as bright through negative lobes, so the
+    level is in effect free and the tone is the start's. Holding the rendered light keeps more of a beard on the
+    renders of known albedo and costs the shadow pairs 0.7 dB (docs/skin-tone.md "The prior")."""
     learning_rate: float = 0.0
     """Adam step of the tone in stage 2 (degrees of ITA); 0: the tone stays where it starts, the skin in the key
     light under the scene's white level (deface/fit/scene_light.py). 0, as the tone trades freely against the

@@ -98,5 +98,6 @@ def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) 
     if not tone.scene_light_prior or light is None or light.regions is None or rendered.normals is None:
         return torch.zeros(())
     lights = context.scene.lights[context.decoupling.kept]
+    lights = context.renderer.rendered_lights(lights) if tone.level_as_rendered else lights
     return scene_light_level_loss(lights, rendered.normals, light.regions[frame], light.illuminant.white,
                                   tone.weight, tone.exposure_sigma)
