@@ -7,7 +7,8 @@ working photo's pixels:
     K = mean luminance over the beard zone / median over the cheeks and forehead
 
 - beard zone: below the nose's base inside the face's outline (deface/priors/face_region.py ``beard_zone_mask``),
-  less the lips (their landmarks' hull grown by 2 % of the face), on pixels the fitted face covers and h calls face;
+  less the lips and nostrils (``feature_mask_from_landmarks``, grown by 2 % of the face), on pixels the fitted face
+  covers and h calls face;
 - cheeks and forehead: the skin-tone boxes of the UV layout (deface/models/ita.py ``in_tone_boxes``);
 - K_photo from the working photo (linear), K_map from the diffuse map read at each pixel's UV through the fitted mesh.
 
@@ -24,38 +25,28 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 
 from deface.export.load import load_fit
 from deface.io.images import LUMINANCE, srgb_to_linear
 from deface.models.ita import in_tone_boxes, pixel_uvs
-from deface.priors.face_region import MEDIAPIPE_FEATURES, beard_zone_mask
+from deface.priors.face_region import beard_zone_mask, feature_mask_from_landmarks
+from deface.render.mesh import sample_texture
 
-LIP_MARGIN = 0.02
-"""The lips' hull is grown by this share of the face's size (its landmarks' box diagonal) before it is left out."""
+FEATURE_MARGIN = 0.02
+"""The features' hulls are grown by this share of the face's size (its landmarks' box diagonal) before they are
+left out."""
 
 
 def region_masks(landmarks: np.ndarray, uv: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(beard zone, cheeks and forehead) [H, W] bool over ``usable`` pixels, from MediaPipe ``landmarks`` [478, 2]
     and per-pixel ``uv`` [H, W, 2]."""
     shape = usable.shape
-    lips = np.zeros(shape, np.uint8)
-    cv2.fillConvexPoly(lips, cv2.convexHull(landmarks[list(MEDIAPIPE_FEATURES["lips"])].astype(np.int32)), 1)
     size = float(np.hypot(*(landmarks.max(0) - landmarks.min(0))))
-    radius = max(1, int(round(LIP_MARGIN * size)))
-    lips = cv2.dilate(lips, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1,) * 2)).astype(bool)
-    beard = beard_zone_mask(landmarks, shape) & ~lips & usable
+    features = feature_mask_from_landmarks(landmarks, shape, max(1, int(round(FEATURE_MARGIN * size))))
+    beard = beard_zone_mask(landmarks, shape) & ~features & usable
     return beard, in_tone_boxes(uv) & usable & ~beard
-
-
-def sample_map(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear read of ``texture`` [S, S, C] (row 0 = v 1) at ``uv`` [H, W, 2] -> [H, W, C]."""
-    size = texture.shape[0]
-    x = (uv[..., 0] * size - 0.5).astype(np.float32)
-    y = ((1.0 - uv[..., 1]) * size - 0.5).astype(np.float32)
-    return cv2.remap(texture.astype(np.float32), x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
 def contrast(luminance: np.ndarray, beard: np.ndarray, skin: np.ndarray) -> float:
@@ -75,9 +66,8 @@ def measure(folder: Path) -> dict:
     if beard.sum() < 50 or skin.sum() < 50:
         raise SystemExit(f"{folder}: too few pixels in the beard zone ({beard.sum()}) or the cheeks ({skin.sum()})")
     photo = srgb_to_linear(frame.photo_srgb.astype(np.float64)) @ LUMINANCE
-    diffuse = result.textures.diffuse
-    diffuse = diffuse.detach().numpy() if isinstance(diffuse, torch.Tensor) else np.asarray(diffuse)
-    albedo = sample_map(diffuse, uv) @ LUMINANCE
+    texel = sample_texture(result.textures.diffuse.detach(), torch.as_tensor(uv.reshape(-1, 2), dtype=torch.float32))
+    albedo = texel.numpy().reshape(*uv.shape[:2], 3) @ LUMINANCE
     k_photo, k_map = contrast(photo, beard, skin), contrast(albedo, beard, skin)
     return {"k_photo": k_photo, "k_map": k_map, "kept": (1.0 - k_map) / (1.0 - k_photo),
             "beard_pixels": int(beard.sum()), "skin_pixels": int(skin.sum())}

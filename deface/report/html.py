@@ -68,8 +68,9 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
     images = folder / REPORT_DIR
     images.mkdir(parents=True, exist_ok=True)
     base = "" if fit.num_frames == 1 else "frames/000/"
+    rendered = fit.renderer.rendered_lights(fit.lights.kept_sh)
     for slot, light in enumerate(fit.lights.kept):
-        save_png(images / f"sphere_{light}.png", lit_sphere(fit.renderer.rendered_lights(fit.lights.kept_sh)[slot]))
+        save_png(images / f"sphere_{light}.png", lit_sphere(rendered[slot]))
     neutral = fit.render(lights=white_light(fit.lights.bands))[0]
     save_png(images / "neutral.png", neutral.face.numpy())
     save_png(images / "input.png", fit.frames[0].photo_srgb, srgb=False)
