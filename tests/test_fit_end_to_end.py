@@ -112,6 +112,7 @@ def test_fit_command_writes_all_outputs(photos, tmp_path):
     again = CliRunner().invoke(app, ["fit", str(photos / "real-foliage-shadow-9177-004.png"), "-o", str(tmp_path),
                                      "--preset", "fast", "--iterations", "30,12,4"])
     assert again.exit_code == 0 and "already done" in again.output
+    assert "1 of 1 input(s) done, 0 failed" in again.output.splitlines()[-1]  # counted once, not twice
 
 
 def test_bad_inputs_fail_in_one_line_and_the_batch_goes_on(tmp_path, photos):

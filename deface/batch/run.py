@@ -69,7 +69,7 @@ def run_batch(items: list[InputItem], output: Path, config: FitConfig, models: P
     plan = plan_batch(items, output, config, options.overwrite, options.retry_failed)
     jobs = [Job(item, output, config, models, options.overwrite) for item in plan.todo]
     workers = min(options.jobs or cpu_count(), len(jobs))
-    tally = Tally(len(items), done=len(plan.finished), left=len(plan.left))
+    tally = Tally(len(items), left=len(plan.left))  # report_plan counts the finished ones
     engine = "ray" if options.engine == "ray" else "local" if workers > 1 else "inline"
     batch = BatchRun(output, config, tally, options.verbose, engine, jobs=jobs)
     with BatchDisplay(tally, live=not options.quiet and engine != "inline") as display:
