@@ -72,25 +72,6 @@ def test_kept_lights_renormalise_and_survive_state_dict():
         field.keep([0, 0])
 
 
-def test_a_merged_light_takes_both_masks_and_survives_state_dict():
-    torch.manual_seed(2)
-    field = LightMaskField(4)
-    coords = pixel_coordinates(3, 5)
-    full = field(coords)
-    field.keep([2, 0, 3])
-    field.merge(2, 3)
-    merged = field(coords)
-    chosen = full[..., [2, 0]] + torch.stack([full[..., 3], torch.zeros_like(full[..., 3])], dim=-1)
-    expected = chosen / full[..., [2, 0, 3]].sum(-1, keepdim=True)
-    assert field.kept == [2, 0] and field.members == {2: [3]}
-    assert torch.allclose(merged, expected, atol=1e-6)
-    clone = LightMaskField(4)
-    clone.load_state_dict(field.state_dict())
-    assert clone.kept == [2, 0] and torch.allclose(clone(coords), merged, atol=1e-6)
-    with pytest.raises(ValueError):
-        field.merge(2, 3)  # 3 is no longer kept
-
-
 def test_fourier_option_changes_input_width_only():
     field = LightMaskField(3, fourier_frequencies=4)
     assert field.mlp[0].in_features == 3 * 9

@@ -11,10 +11,6 @@ forward pass then returns masks over the kept lights only, renormalised to sum t
 logits equals the full softmax renormalised over the kept subset:
 p_k / sum_kept p_j = e^{z_k} / sum_kept e^{z_j}.
 The kept set is saved in the module's state dict (``_extra_state``).
-
-``merge(into, member)`` joins a kept light's mask with another's (deface/decouple/merge.py): the pair's mask is
-the sum of their probabilities, i.e. a softmax over the group's logsumexp logit, and ``member`` leaves the kept
-set.
 """
 
 from __future__ import annotations
@@ -68,7 +64,6 @@ class LightMaskField(nn.Module):
         in_dim = 3 * (1 + 2 * fourier_frequencies)
         self.mlp = _mlp([in_dim, *hidden, num_lights], negative_slope)
         self._kept: list[int] = list(range(num_lights))
-        self._members: dict[int, list[int]] = {}  # kept light -> the lights merged into it
 
     @property
     def kept(self) -> list[int]:
@@ -86,19 +81,6 @@ class LightMaskField(nn.Module):
         if not indices or len(set(indices)) != len(indices) or not valid:
             raise ValueError(f"kept lights must be distinct indices in [0, {self.num_lights}), got {indices}")
         self._kept = indices
-        self._members = {head: members for head, members in self._members.items() if head in indices}
-
-    def merge(self, into: int, member: int) -> None:
-        """Join kept light ``member``'s mask into kept light ``into``'s; ``member`` is no longer kept."""
-        if into == member or into not in self._kept or member not in self._kept:
-            raise ValueError(f"can only merge two distinct kept lights of {self._kept}, got {into} and {member}")
-        self._members[into] = [*self._members.get(into, []), member, *self._members.pop(member, [])]
-        self._kept = [i for i in self._kept if i != member]
-
-    @property
-    def members(self) -> dict[int, list[int]]:
-        """Kept light -> the lights merged into it (only kept lights with merges)."""
-        return {head: list(members) for head, members in self._members.items()}
 
     def logits(self, coords: torch.Tensor) -> torch.Tensor:
         """Raw logits [..., n] over all n lights."""
@@ -108,21 +90,15 @@ class LightMaskField(nn.Module):
     def forward(self, coords: torch.Tensor) -> torch.Tensor:
         """coords [..., 3] -> masks [..., n_kept], non-negative, summing to 1 over the last axis."""
         logits = self.logits(coords)
-        if self._members:
-            logits = torch.stack([torch.logsumexp(logits[..., [head, *self._members.get(head, [])]], dim=-1)
-                                  for head in self._kept], dim=-1)
-        elif self.num_kept != self.num_lights:
+        if self.num_kept != self.num_lights:
             logits = logits[..., self._kept]
         return torch.softmax(logits, dim=-1)
 
     def get_extra_state(self) -> dict:
-        return {"kept": list(self._kept), "merged": self.members}
+        return {"kept": list(self._kept)}
 
     def set_extra_state(self, state: dict) -> None:
-        merged = {int(head): [int(i) for i in members] for head, members in state.get("merged", {}).items()}
-        self._members = {}
         self.keep(state["kept"])
-        self._members = merged
 
 
 class FaceRegionField(nn.Module):

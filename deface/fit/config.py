@@ -79,12 +79,6 @@ class DecoupleConfig:
     (docs/design.md "Default preset")."""
     ace_iteration: int = 100
     """iter_0: the stage-2 iteration at which ACE selects the kept lights."""
-    merge_tolerance: float = 0.0
-    """Two kept lights become one when one light fits the evidence pixels of both masks nearly as well as one
-    light each: when the weighted RMS residual rises by less than this share of their mean intensity
-    (deface/decouple/merge.py). Tested at ACE and every `merge_every` steps after; 0 = never (the paper)."""
-    merge_every: int = 50
-    """Stage-2 steps between the merge tests after ACE."""
     area_normaliser: Literal["render_mask", "image"] = "render_mask"
     """ACE area over the render mask (authors' code) or over all pixels (paper's formula)."""
     loss_form: Literal["code", "paper"] = "code"

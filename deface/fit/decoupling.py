@@ -97,13 +97,6 @@ class Decoupling(torch.nn.Module):
             return coverage * classifier
         return coverage
 
-    def merge_lights(self, into: int, member: int) -> None:
-        """Join kept light ``member``'s mask into kept light ``into``'s (deface/decouple/merge.py)."""
-        if self.light_field is None:
-            raise ValueError("merging lights needs the light-mask field f")
-        self.light_field.merge(into, member)
-        self._kept = self.light_field.kept
-
     def run_ace(self, all_masks: torch.Tensor, coverage: torch.Tensor) -> list[int]:
         """Select kept lights from M_N [T, n, H, W] (all lights) and M_R [T, H, W]; returns kept indices."""
         kept = ace_select(all_masks, coverage, self.config.epsilon, self.config.area_normaliser)

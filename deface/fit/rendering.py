@@ -33,7 +33,7 @@ def render_posed(context: StageContext, frame: int, textures: Textures, refresh_
     """Stage 2's render of a frame at the parameters' current values (one sample per pixel), under the kept
     lights; the shadow transfer refreshed when ``refresh_shadows`` and the mesh moved."""
     geometry = geometry or context.geometry(frame)
-    transfer = transfer_of(context, frame, geometry.mesh, refresh_shadows)
+    transfer = _transfer(context, frame, geometry.mesh, refresh_shadows)
     output = render_frame(context.renderer, geometry.mesh, geometry.camera, textures,
                           context.scene.lights[context.decoupling.kept], transfer)
     return compose(context, frame, output)
@@ -59,8 +59,7 @@ def compose(context: StageContext, frame: int, output: RenderOutput,
     return FrameRender.of(output, light_masks, face_region, probability)
 
 
-def transfer_of(context: StageContext, frame: int, mesh: Mesh, refresh: bool = False) -> ShadowTransfer | None:
-    """The frame's shadow transfer (None without shadows): the cached one unless ``refresh`` and it moved."""
+def _transfer(context: StageContext, frame: int, mesh: Mesh, refresh: bool) -> ShadowTransfer | None:
     if not context.config.render.shadows:
         return None
     cache = context.shadow_caches[frame]

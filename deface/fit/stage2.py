@@ -16,7 +16,6 @@ from deface.fit import rendering
 from deface.fit.coarse import can_coarsen, coarse_context, half_size
 from deface.fit.convergence import converged
 from deface.fit.guard import StepGuard
-from deface.fit.merging import merge_lights
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.losses import decouple as decouple_losses
 from deface.models.tone_neutral import ToneBoxColours, keep_tone_
@@ -47,8 +46,6 @@ def run_stage2(context: StageContext) -> Stage2Result:
         level = coarse if step < coarse_steps else context
         if step == ace_at and decoupling.light_field is not None:
             _apply_ace(level)
-        if _merge_test_due(config, step, ace_at) and len(decoupling.kept) > 1:
-            merge_lights(level)
         optimiser.zero_grad(set_to_none=True)
         refresh = step % config.render.shadow_refresh_every == 0
         terms = LossTerms()
@@ -73,13 +70,6 @@ def run_stage2(context: StageContext) -> Stage2Result:
                              f"(tolerance {iterations.stage2_tolerance} per {iterations.convergence_window} steps)")
             break
     return Stage2Result(history, term_history, decoupling.kept)
-
-
-def _merge_test_due(config, step: int, ace_at: int) -> bool:
-    """The merge test (``decouple.merge_tolerance``) runs at ACE and every ``merge_every`` steps after."""
-    decouple = config.decouple
-    return (decouple.merge_tolerance > 0 and decouple.light_masks and step >= ace_at
-            and (step - ace_at) % max(decouple.merge_every, 1) == 0)
 
 
 def _weighted_by_evidence(context: StageContext) -> StageContext:
