@@ -97,23 +97,3 @@ def test_the_strength_sets_how_fast_the_weight_falls_with_the_face_s_typical_tex
     strong, mild = (texture_weight(image, FACE, FACE_SIZE, replace(CONFIG, strength=s)) for s in (0.75, 3.0))
     skin = (slice(10, 50), slice(20, 140))
     assert 0.2 < strong[skin].mean() < mild[skin].mean() < 0.95
-
-
-def test_the_beard_zone_takes_its_own_strength_and_nothing_else_changes():
-    """Stubble at the working size: a faint darkening with texture no stronger than the skin's pores elsewhere. With
-    ``beard_zone_strength`` below ``strength`` the zone's pixels count less; outside it every weight is as before."""
-    image = _skin(seed=3)
-    zone = np.zeros((SIZE, SIZE), bool)
-    zone[100:150, 40:120] = True
-    image[zone] *= 0.8
-    config = ShadingEvidenceConfig(strength=1.5)
-    plain = texture_weight(image, FACE, FACE_SIZE, config)
-    weighed = texture_weight(image, FACE, FACE_SIZE, replace(config, beard_zone_strength=0.4), beard_zone=zone)
-    np.testing.assert_array_equal(weighed[~zone], plain[~zone])
-    # weight = exp(-e / (s m)): at the same energy e the zone's is the default's to the power 1.5 / 0.4
-    np.testing.assert_allclose(weighed[zone], plain[zone] ** (1.5 / 0.4), rtol=1e-4, atol=1e-7)
-    assert np.median(weighed[zone]) < 0.5 * np.median(plain[zone])
-    # no zone given, or a zone strength of 0: the default's weights
-    np.testing.assert_array_equal(texture_weight(image, FACE, FACE_SIZE, replace(config, beard_zone_strength=0.4)),
-                                  plain)
-    np.testing.assert_array_equal(texture_weight(image, FACE, FACE_SIZE, config, beard_zone=zone), plain)

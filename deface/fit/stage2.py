@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-import numpy as np
 import torch
 
 from deface.decouple.ace import light_areas
@@ -20,7 +19,6 @@ from deface.fit.guard import StepGuard
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.losses import decouple as decouple_losses
 from deface.models.tone_neutral import ToneBoxColours, keep_tone_
-from deface.priors.face_region import beard_zone_mask
 from deface.priors.shading_evidence import texture_weight
 
 
@@ -85,18 +83,10 @@ def _weighted_by_evidence(context: StageContext) -> StageContext:
     sizes = inputs.landmarks.face_size if inputs.landmarks.face_size is not None else \
         torch.full((inputs.num_frames,), float(max(context.target.size)) / 2)
     weighted = tuple(h * torch.as_tensor(texture_weight(context.target.images[frame].numpy(), h.numpy(),
-                                                        float(sizes[frame]), evidence,
-                                                        _beard_zone(context, frame, tuple(h.shape))))
+                                                        float(sizes[frame]), evidence))
                      for frame, h in enumerate(inputs.face_classifier))
     context.decoupling.set_evidence(torch.stack(weighted))
     return replace(context, inputs=replace(inputs, face_classifier=weighted))
-
-
-def _beard_zone(context: StageContext, frame: int, shape: tuple[int, int]) -> np.ndarray | None:
-    """Where the frame's beard can grow (its landmarks' ``beard_zone_mask``), when the evidence weighs it apart."""
-    if context.config.shading_evidence.beard_zone_strength <= 0:
-        return None
-    return beard_zone_mask(np.asarray(context.target.landmarks[frame].points[:, :2]), shape)
 
 
 def _coarse_level(context: StageContext) -> tuple[int, StageContext | None]:

@@ -49,18 +49,11 @@ class ShadingEvidenceConfig:
     strokes' shading is a step too) and the beard went into the lights (docs/textures.md)."""
     floor: float = 1e-3
     """Least linear luminance of the log (dark pixels' noise stays finite)."""
-    beard_zone_strength: float = 0.0
-    """``strength`` inside the beard zone (below the nose's base within the face's outline, deface/priors/
-    face_region.py ``beard_zone_mask``; MediaPipe landmarks only), where facial hair grows: stubble at the working
-    size is a smooth darkening with little fine texture, so there only pixels smoother than the face's typical
-    texture count as shading. 0 = ``strength`` there too (docs/textures.md "The person's detail")."""
 
 
-def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config: ShadingEvidenceConfig,
-                   beard_zone: np.ndarray | None = None) -> np.ndarray:
+def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config: ShadingEvidenceConfig) -> np.ndarray:
     """[H, W] in (0, 1]: the weight of each pixel of ``image`` (linear RGB [H, W, 3]) in stage 2's L_pho; ``face``
-    [H, W] in [0, 1] (h) says where the face's median energy is taken, ``face_size`` in pixels; ``beard_zone``
-    [H, W] bool, where ``config.beard_zone_strength`` applies."""
+    [H, W] in [0, 1] (h) says where the face's median energy is taken, ``face_size`` in pixels."""
     if config.strength <= 0:
         return np.ones(image.shape[:2], np.float32)
     log_luminance = np.log(np.maximum(image @ LUMINANCE, config.floor))
@@ -71,10 +64,7 @@ def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config
     reference = float(np.median(energy[inside])) if inside.any() else float(np.median(energy))
     if config.edges_as_shading:  # after the reference: it is the face's typical texture, steps and all
         energy = np.maximum(energy - step_energy(log_luminance, fine_scale, energy_scale), 0.0)
-    strength = np.full(energy.shape, config.strength)
-    if beard_zone is not None and config.beard_zone_strength > 0:
-        strength[beard_zone] = config.beard_zone_strength
-    return np.exp(-energy / (strength * max(reference, 1e-12))).astype(np.float32)
+    return np.exp(-energy / (config.strength * max(reference, 1e-12))).astype(np.float32)
 
 
 def step_energy(log_luminance: np.ndarray, fine_scale: float, energy_scale: float) -> np.ndarray:
