@@ -22,12 +22,12 @@ from deface.export.load import load_fit
 from deface.export.outputs import write_fit
 from deface.fit import presets
 from deface.fit.config import override
-from deface.fit.framing import Framing, choose_framing, texture_size_for
+from deface.fit.framing import Framing, choose_framing, decode_side, face_box, texture_size_for
 from deface.fit.log import FitLog
 from deface.fit.pipeline import fit_target
 from deface.fit.target import FitTarget, frame_target
 from deface.io.images import linear_to_srgb, resize_max, to_uint8
-from deface.landmarks.detect import Landmarks
+from deface.landmarks.detect import Landmarks, detect_landmarks
 from deface.models import load_face_model
 from deface.render import kernels
 from deface.render.camera import Camera
@@ -87,6 +87,46 @@ def test_positions_round_trip_and_the_principal_point_is_the_input_centre():
     left, top = framing.scene_offset
     assert np.allclose(framing.to_input(np.zeros(2)), np.array([left, top]) / np.array(framing.factors))
     assert Framing.from_record(json.loads(json.dumps(framing.record()))) == framing
+
+
+def test_a_small_face_is_decoded_at_the_size_its_crop_needs_within_the_file_and_the_pixel_budget():
+    file, decoded = (6000, 4000), (2048, 1365)
+    # a face box of 100 decoded pixels: a 200-px crop, 512 wanted, so 2.56 times the decoded size
+    assert decode_side(_box((1000, 700), 100), decoded, file, 512, 2.0, 10**9) == int(2048 * 512 / 200)
+    # the file's own size and the pixel budget bound it; a face already large keeps the decoded size
+    assert decode_side(_box((1000, 700), 20), decoded, file, 512, 2.0, 10**9) == 6000
+    assert decode_side(_box((1000, 700), 20), decoded, file, 512, 2.0, 6_000_000) == int(6000 * 0.5)
+    assert decode_side(_box((1000, 700), 400), decoded, file, 512, 2.0, 10**9) == 2048
+    # what it asks for puts the crop at the cap: the framing of the larger decode holds the face at 512 pixels
+    side = decode_side(_box((1000, 700), 100), decoded, file, 512, 2.0, 10**9)
+    factor = side / 2048
+    larger = (round(2048 * factor), round(1365 * factor))
+    framing = choose_framing(larger, _box((1000 * factor, 700 * factor), 100 * factor), 512, 2.0)
+    assert max(framing.size) == pytest.approx(512, abs=2) and framing.scale == pytest.approx(1.0, abs=0.01)
+
+
+def test_a_photo_whose_face_is_small_is_decoded_larger_for_it(photos, tmp_path):
+    """deface/batch/task.py load_photo: a 160-px face in a 4000 x 3000 JPEG is 82 px at the decoder's 2048; the photo
+    is decoded at the size that gives the face's crop the fit's resolution, and the face keeps the file's pixels."""
+    from deface.batch.task import load_photo
+    from deface.io.images import LOAD_MAX_SIDE
+
+    face = (np.asarray(Image.open(photos / "facenet-paul_rudd.png").convert("RGB")))  # 160 x 160
+    canvas = np.full((3000, 4000, 3), (110, 120, 100), np.uint8)
+    canvas[1400:1560, 2900:3060] = face
+    path = tmp_path / "group.jpg"
+    Image.fromarray(canvas).save(path, quality=95)
+    config = presets.get("default")
+    frame = load_photo(path, config)
+    assert max(frame.shape[:2]) > 1.5 * LOAD_MAX_SIDE
+    scale = frame.shape[1] / 4000
+    landmarks = detect_landmarks(frame)
+    crop = choose_framing((frame.shape[1], frame.shape[0]), face_box([landmarks.points], frame.shape[1::-1]),
+                          config.resolution, config.crop.margin)
+    assert max(crop.size) >= 0.9 * min(config.resolution, 2 * 160 * 0.8)  # the face's crop, not 82 px of it
+    assert np.abs(landmarks.points.mean(0) / scale - (2980, 1480)).max() < 20
+    whole = load_photo(path, override(config, **{"crop.enabled": False}))  # no crop: the whole photo at the cap
+    assert max(whole.shape[:2]) == LOAD_MAX_SIDE
 
 
 def test_the_texture_size_is_the_power_of_two_nearest_what_the_face_supports_within_the_range():

@@ -1,4 +1,5 @@
-"""MediaPipe detection: a real face, no face, two faces and face choice, tiny crops, video tracking."""
+"""MediaPipe detection: a real face, no face, two faces and face choice, tiny crops, small faces in large photos,
+video tracking."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from deface.io import load_image
-from deface.landmarks.detect import NUM_LANDMARKS, NoFaceError, detect_landmarks, track_video
+from deface.landmarks.detect import NUM_LANDMARKS, FaceMeshDetector, NoFaceError, detect_landmarks, track_video
 
 
 def test_astronaut_face():
@@ -73,3 +74,36 @@ def test_video_tracking(shared):
     assert np.abs(np.diff(centres, axis=0)).max() < 60  # the same face, moving smoothly
     with pytest.raises(NoFaceError, match="blank"):
         track_video([np.zeros((64, 64, 3), np.float32)] * 2, source="blank")
+
+
+def test_small_face_in_a_large_photo_is_found_and_mapped_back(photos):
+    """A face a twelfth of its photo's width (too small for Face Mesh's own detector): found by the full-range
+    detector's box and Face Mesh on a crop around it, points in the photo's pixels."""
+    from deface.landmarks.detect import face_boxes
+
+    face = (load_image(photos / "facenet-paul_rudd.png") * 255).astype(np.uint8)  # 160 x 160
+    canvas = np.full((1400, 2000, 3), (110, 120, 100), np.uint8)
+    canvas[900:1060, 1500:1660] = face
+    reference = detect_landmarks(face)
+    with FaceMeshDetector() as detector:
+        assert detector.raw_faces(canvas) == []  # the short-range detector alone misses it
+    boxes = face_boxes(canvas)
+    assert len(boxes) == 1 and 1450 < boxes[0][0] < boxes[0][2] < 1710 and 850 < boxes[0][1] < boxes[0][3] < 1110
+    landmarks = detect_landmarks(canvas)
+    assert landmarks.image_size == (2000, 1400) and landmarks.num_faces == 1
+    error = np.linalg.norm(landmarks.points - (reference.points + [1500, 900]), axis=1).mean()
+    assert error < 0.05 * np.linalg.norm(reference.points[33] - reference.points[263])
+
+
+def test_a_small_face_in_a_clip_is_tracked(photos):
+    """Frames too large around the face for the tracker's own detector are searched as photos are."""
+    face = (load_image(photos / "facenet-paul_rudd.png") * 255).astype(np.uint8)  # 160 x 160
+    frames = []
+    for shift in (0, 6, 12):
+        canvas = np.full((1080, 1920, 3), (110, 120, 100), np.uint8)
+        canvas[800:960, 1500 + shift:1660 + shift] = face
+        frames.append(canvas)
+    tracked = track_video(frames, source="small.mp4")
+    assert all(item is not None for item in tracked)
+    centres = np.array([item.points.mean(0) for item in tracked])
+    assert np.allclose(np.diff(centres[:, 0]), 6, atol=2) and np.all(np.abs(centres[:, 1] - 880) < 25)

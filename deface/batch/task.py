@@ -15,13 +15,14 @@ import numpy as np
 from deface.export.files import OutputBusy, OutputError, claimed_output
 from deface.export.outputs import write_fit
 from deface.fit.config import FitConfig
+from deface.fit.framing import decode_side, face_box
 from deface.fit.guard import NonFiniteError
 from deface.fit.log import FitLog
 from deface.fit.pipeline import fit
-from deface.io.images import LOAD_MAX_SIDE, InputError, image_size, load_image, one_line
+from deface.io.images import LOAD_MAX_PIXELS, LOAD_MAX_SIDE, InputError, image_size, load_image, one_line
 from deface.io.inputs import InputItem
 from deface.io.video import read_spread_frames
-from deface.landmarks.detect import NoFaceError
+from deface.landmarks.detect import NoFaceError, detect_landmarks
 from deface.paths import ModelFileError
 from deface.report.html import write_report
 
@@ -96,8 +97,24 @@ def run_job(job: Job, log: FitLog) -> Outcome:
 def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], list[int]]:
     """sRGB frames of an input and their indices in the source (a photo is frame 0)."""
     if item.kind == "image":
-        return [load_image(item.path, max_side=LOAD_MAX_SIDE)], [0]
+        return [load_photo(item.path, config)], [0]
     return read_spread_frames(item.path, config.max_frames, config.frame_stride, max_side=LOAD_MAX_SIDE)
+
+
+def load_photo(path: Path, config: FitConfig) -> np.ndarray:
+    """A photo decoded at ``LOAD_MAX_SIDE``, or larger where its face needs more of the file's pixels to reach the
+    fit's working resolution (:func:`deface.fit.framing.decode_side`, within ``LOAD_MAX_PIXELS``)."""
+    frame = load_image(path, max_side=LOAD_MAX_SIDE)
+    file_size, decoded_size = image_size(path), (frame.shape[1], frame.shape[0])
+    if max(file_size) <= max(decoded_size) or not config.crop.enabled:
+        return frame
+    try:
+        points = detect_landmarks(frame, face_index=config.face_index, source=str(path)).points
+    except (NoFaceError, ValueError):
+        return frame  # the fit says so, with its own message
+    side = decode_side(face_box([points], decoded_size), decoded_size, file_size, config.resolution,
+                       config.crop.margin, LOAD_MAX_PIXELS)
+    return load_image(path, max_side=side) if side > 1.05 * max(decoded_size) else frame
 
 
 def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
@@ -105,11 +122,14 @@ def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
     """Fit ``item`` and write its outputs atomically into ``folder`` -> the kept lights' indices and the texture's
     skin tone."""
     frames, indices = load_frames(item, config)
-    result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log)
     record = {"path": str(item.path), "kind": item.kind, "frames": indices,
               "size": [int(frames[0].shape[1]), int(frames[0].shape[0])]}
     if item.kind == "image":  # a photo above LOAD_MAX_SIDE was decoded smaller: params.json's camera says both
         record["file_size"] = list(image_size(item.path))
+        if max(record["size"]) > LOAD_MAX_SIDE:
+            log.info(f"decoded at {record['size'][0]} x {record['size'][1]} of the file's "
+                     f"{record['file_size'][0]} x {record['file_size'][1]}: the face is small in the photo")
+    result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log)
     try:
         write_fit(result, folder, record, page=write_report)
     except OSError as error:

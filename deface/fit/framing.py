@@ -173,6 +173,19 @@ def _crop_extent(input_size: tuple[int, int], box, margin: float) -> tuple[float
     return out[0][0], out[1][0], out[0][1], out[1][1]
 
 
+def decode_side(box: tuple[float, float, float, float], decoded_size: tuple[int, int], file_size: tuple[int, int],
+                resolution: int, margin: float, max_pixels: int) -> int:
+    """The longer side to decode a photo of ``file_size`` at so that its face's crop (landmarks ``box`` found in
+    the photo decoded at ``decoded_size``) gets up to ``resolution`` working pixels: never more than the file has
+    nor than ``max_pixels`` in all, never less than ``decoded_size``. A small face in a large photo (a half-body
+    shot, a group) otherwise lost the pixels the fit's cap would give it to the decoder's cap."""
+    longest = max(decoded_size)
+    crop = max(_crop_extent(decoded_size, box, margin)[2:])
+    wanted = longest * resolution / max(crop, 1.0)
+    budget = max(file_size) * math.sqrt(max_pixels / max(file_size[0] * file_size[1], 1))
+    return int(max(longest, min(wanted, budget, max(file_size))))
+
+
 def texture_size_for(texels_per_side: float, limits: tuple[int, int]) -> int:
     """The UV maps' side for a face whose pixels support ``texels_per_side`` (one pixel per texel): the power
     of two nearest it (in log scale), within ``limits`` (smallest, largest)."""

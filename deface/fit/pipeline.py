@@ -31,6 +31,7 @@ from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
 from deface.fit.target import FitTarget, frame_target
 from deface.fit.texels import complete_textures, seen_texels, texture_confidence
+from deface.io.images import LOAD_MAX_SIDE, resize_max
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
 from deface.models.ita import texture_tone
@@ -39,6 +40,7 @@ from deface.priors.checker import CheckerUnavailable, checker_illuminant, find_c
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
 from deface.priors.illuminant import CARD_SOURCES, estimate_illuminant, known_illuminant
+from deface.render.camera import Camera
 from deface.runtime import keep_freed_memory
 from deface.texture.confidence import triangle_density
 
@@ -278,11 +280,13 @@ def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig, log
     known = known_illuminant(scene, config.tone.illuminant, target.scale)
     if known is not None:
         return known
-    checker = _checker_illuminant(scene[0], config.tone.illuminant, log)
+    # Statistics of the whole frame: a photo decoded large for a small face (deface/batch/task.py) is read smaller.
+    reading = [resize_max(frame, LOAD_MAX_SIDE)[0] for frame in scene]
+    checker = _checker_illuminant(reading[0], config.tone.illuminant, log)
     if checker is not None:
         return checker
-    faces = [_scene_face(face, target, frame) for frame in range(target.num_frames)]
-    return estimate_illuminant(scene, faces, config.tone.illuminant)
+    faces = [_scene_face(face, target, frame, reading[frame].shape[:2]) for frame in range(target.num_frames)]
+    return estimate_illuminant(reading, faces, config.tone.illuminant)
 
 
 def _checker_illuminant(photo: np.ndarray, settings, log: FitLog):
@@ -305,10 +309,12 @@ def _checker_illuminant(photo: np.ndarray, settings, log: FitLog):
     return checker_illuminant(reading, settings)
 
 
-def _scene_face(face: PosedFace, target: FitTarget, frame: int) -> np.ndarray:
-    """[Hs, Ws] bool: the stage-1 face's coverage of the whole frame at the working scale."""
+def _scene_face(face: PosedFace, target: FitTarget, frame: int, size: tuple[int, int]) -> np.ndarray:
+    """[H, W] bool (``size``): the stage-1 face's coverage of the whole frame resized to ``size``."""
     geometry = face.geometry(frame)
     camera = geometry.camera if target.framing.is_whole else target.framing.scene_camera(geometry.camera)
+    if (camera.height, camera.width) != tuple(size):
+        camera = Camera(camera.focal * size[1] / camera.width, camera.rotation, camera.translation, size[1], size[0])
     return face.renderer.rasterize(geometry.mesh, camera).mask.numpy() > 0
 
 

@@ -20,8 +20,13 @@ CLIPPED = 0.98
 
 
 # Larger photos are shrunk while they are decoded (JPEG: at a fraction of the full size) so that an
-# 8000 x 6000 photo never exists as a float image; the fit works at --resolution <= 2048 anyway.
+# 8000 x 6000 photo never exists as a float image whole; the fit works at --resolution <= 2048 anyway.
 LOAD_MAX_SIDE = 2048
+# A photo whose face is small in it is decoded larger, so that the face keeps the pixels the fit's resolution asks
+# for (deface/batch/task.py load_photo), up to this many pixels: 8 MP, 96 MB as float RGB; the fit of a 6000 x 4000
+# photo decoded at 8 MP peaks at 1.43 GB (BENCHMARKS.md), from the copies of the whole photo that render.png and
+# params.npz are written from.
+LOAD_MAX_PIXELS = 8_000_000
 # Pillow's decompression-bomb guard would allow ~179 MP; a photo above this is refused before decoding.
 MAX_PIXELS = 120_000_000
 
@@ -106,10 +111,12 @@ def _to_rgb_array(img: Image.Image) -> np.ndarray:
 
 def to_uint8(image: np.ndarray, srgb: bool) -> np.ndarray:
     """[H, W] or [H, W, C] linear float -> uint8, gamma-encoded when ``srgb``."""
-    image = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float32)), 0.0, 1.0)
+    image = np.array(image, dtype=np.float32)  # one copy, then in place: a photo decoded large is 16 MP
+    np.clip(np.nan_to_num(image, copy=False), 0.0, 1.0, out=image)
     if srgb:
-        image = image ** (1.0 / GAMMA)
-    return np.round(image * 255.0).astype(np.uint8)
+        np.power(image, 1.0 / GAMMA, out=image)
+    image *= 255.0
+    return np.rint(image, out=image).astype(np.uint8)
 
 
 def save_png(path: Path, image: np.ndarray, srgb: bool = True) -> None:
@@ -123,7 +130,8 @@ def save_png(path: Path, image: np.ndarray, srgb: bool = True) -> None:
 
 def srgb_to_linear(image: np.ndarray) -> np.ndarray:
     """sRGB-encoded values in [0, 1] -> linear, power law gamma 2.2 (NextFace's convention)."""
-    return np.power(np.clip(image, 0.0, None), GAMMA).astype(np.float32)
+    linear = np.clip(image, 0.0, None).astype(np.float32, copy=False)  # a copy, then in place (a 8 MP photo)
+    return np.power(linear, GAMMA, out=linear if isinstance(linear, np.ndarray) else None)
 
 
 def linear_to_srgb(image: np.ndarray) -> np.ndarray:
