@@ -160,17 +160,16 @@ def start_of(path: str, settings: tuple[str, ...], resolution: int) -> tuple[flo
     from deface.fit.config import override, set_from_text
     from deface.fit.log import FitLog
     from deface.fit.rendering import albedo_textures
-    from deface.fit.target import FitTarget
     from deface.io.images import load_image
 
     torch.set_num_threads(1)
     config = override(presets.get("default"), resolution=resolution)
     for assignment in settings:
         config = set_from_text(config, assignment)
-    work, landmarks, scale, _ = pipeline.detect([load_image(path)], config, path, False)
     from deface.models.ita import texture_tone
 
-    context, _ = pipeline.prepare(FitTarget(work, landmarks, scale), config, log=FitLog(quiet=True))
+    target = pipeline.detect_target([load_image(path)], config, path, False)
+    context, _ = pipeline.prepare(target, config, log=FitLog(quiet=True))
     illuminant = context.inputs.scene_light.illuminant
     with torch.no_grad():
         tone = texture_tone(albedo_textures(context, 128).diffuse.numpy(), illuminant.level_sigma)
