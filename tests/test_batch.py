@@ -118,6 +118,10 @@ def test_status_counts_the_done_inputs_tones_by_category_and_how_sure_they_are(t
     assert "two-sigma median 30" in lines[1]  # (8 + 53) / 2 = 30.5 over the two that record it
     assert lines[2] == "light level from: reference card 1, grey world 1"
     assert summarise([_record("a.jpg", "done")]).tones == []  # records written before the tone was recorded
+    grey = {"texture_ita": None, "ita_interval": None, "note": "a grayscale photo shows no skin tone"}
+    append_record(tmp_path, replace(_record("i.jpg", "done"), skin_tone=grey))  # not counted as any tone
+    assert summarise(read_records(tmp_path)).tones[0].startswith("skin tones of 7 fit(s)")  # a-e, g, h
+    assert tone_text(grey) == ", skin tone not shown (grayscale photo)"
     assert tone_text({"texture_ita": 41.6, "ita_interval": [30.2, 50.7]}) == ", skin ITA 42 (30 to 51)"
     assert tone_text({"texture_ita": 41.6, "ita_interval": [41.6, 41.6]}) == ", skin ITA 42"  # a known light
     assert tone_text({"texture_ita": 41.6, "ita_interval": None}) == ", skin ITA 42" and tone_text(None) == ""

@@ -173,7 +173,7 @@ def test_too_little_skin_gives_no_start():
 
 
 def test_a_grayscale_photo_keeps_the_model_tone():
-    from deface.fit.scene_light import grayscale
+    from deface.models.ita import grayscale
 
     skin = photo(skin_albedo(10.0), np.ones(3), hemisphere())
     grey = np.repeat(skin.srgb.mean(-1, keepdims=True), 3, axis=-1)

@@ -174,6 +174,17 @@ def test_the_tone_interval_is_the_map_under_a_light_level_one_sigma_off(lab):
     assert tone["ita_interval_2sigma"] == pytest.approx(wider, abs=1e-6)  # two sigma: the interval of 2 x 0.4
 
 
+@pytest.mark.parametrize("lab", [(68.0, 10.0, 15.0), (40.0, 10.0, 17.5)])
+def test_a_grayscale_photo_gives_no_tone_only_a_note(lab):
+    """The map of a grayscale photo has the model's colour, not the person's: no ITA, no interval."""
+    diffuse = skin_map(lab)
+    colour = linear_to_srgb(diffuse)
+    grey = np.repeat(colour.mean(-1, keepdims=True), 3, axis=-1)
+    assert texture_tone(diffuse, 0.4, colour)["texture_ita"] == pytest.approx(texture_tone(diffuse, 0.4)["texture_ita"])
+    tone = texture_tone(diffuse, 0.4, grey)
+    assert tone["texture_ita"] is None and tone["ita_interval"] is None and "grayscale" in tone["note"]
+
+
 def test_a_dark_skins_interval_is_wider_for_the_same_light_level_spread():
     """ITA moves further per unit of L* near L* = 50 than on a light skin (docs/skin-tone.md, Limits)."""
     widths = [np.ptp(texture_tone(skin_map(lab), 0.3)["ita_interval"]) for lab in ((68.0, 10.0, 15.0),

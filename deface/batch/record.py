@@ -105,6 +105,8 @@ def tone_text(tone: dict | None) -> str:
     """", skin ITA 42 (30 to 51)" for a done line (no range for a known light); "" without a tone."""
     if tone is None:
         return ""
+    if tone.get("texture_ita") is None:
+        return ", skin tone not shown (grayscale photo)" if tone.get("note") else ""
     interval = tone.get("ita_interval")
     open_range = interval is not None and interval[1] > interval[0]
     span = f" ({interval[0]:.0f} to {interval[1]:.0f})" if open_range else ""
@@ -114,7 +116,8 @@ def tone_text(tone: dict | None) -> str:
 def tone_lines(states: Iterable[BatchRecord]) -> list[str]:
     """The skin tones of the done inputs by category, and how many the light level leaves open (for balancing a
     data set by tone; docs/skin-tone.md)."""
-    tones = [r.skin_tone for r in states if r.status == "done" and r.skin_tone is not None]
+    tones = [r.skin_tone for r in states
+             if r.status == "done" and r.skin_tone is not None and r.skin_tone.get("texture_ita") is not None]
     if not tones:
         return []
     counts = {name: 0 for name, _ in ITA_GROUPS}

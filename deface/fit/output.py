@@ -156,7 +156,8 @@ class FitOutput:
         (:func:`~deface.models.ita.texture_tone`; no interval without a white level: a preset without the
         scene-light prior, or a fit saved before it)."""
         illuminant = self.illuminant
-        return {**texture_tone(self.textures.diffuse.detach().numpy(), illuminant and illuminant.level_sigma),
+        return {**texture_tone(self.textures.diffuse.detach().numpy(), illuminant and illuminant.level_sigma,
+                               self.frames[0].photo_srgb),
                 "light_level": illuminant and illuminant.source}
 
     @property

@@ -173,7 +173,11 @@ def _log_tone(context: StageContext, finished: FinishedTextures, log: FitLog) ->
     if light is None:
         return
     illuminant = light.illuminant
-    tone = texture_tone(finished.textures.diffuse.detach().numpy(), illuminant.level_sigma)
+    tone = texture_tone(finished.textures.diffuse.detach().numpy(), illuminant.level_sigma,
+                        context.target.frames_srgb[0])
+    if tone["texture_ita"] is None:
+        log.info(f"skin tone of the texture: not measured ({tone['note']})")
+        return
     if illuminant.level_sigma == 0:
         where = "as given" if illuminant.source == "given" else f"from the {illuminant.source}"
         log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f} (white level {where})")

@@ -59,7 +59,7 @@ from sklearn.linear_model import QuantileRegressor
 from deface.fit.state import SceneLight
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import KEY_QUANTILE, front_directions, peak_white
-from deface.models.ita import CLIPPED, MIN_PIXELS, in_tone_boxes, ita_of_srgb, pixel_uvs
+from deface.models.ita import CLIPPED, MIN_PIXELS, grayscale, in_tone_boxes, ita_of_srgb, pixel_uvs
 from deface.priors.illuminant import CARD_SOURCES, IlluminantEstimate
 
 SKIN_CHROMA = 0.12
@@ -314,10 +314,3 @@ def _start_tone(face, pixels: SkinPixels, white: np.ndarray, config, log) -> Non
     face.model.albedo.tone.clamp_(face.scene.tone, config.tone.ita_range)
     log.info(f"skin tone starts at ITA {float(face.scene.tone.detach()):.1f} (the skin in the key light under "
              "the scene's white level)")
-
-
-def grayscale(srgb: np.ndarray, tolerance: float = 1.5 / 255) -> bool:
-    """Whether colours [N, 3] are grey (all channels equal within ``tolerance`` on 99 % of them)."""
-    if len(srgb) == 0:
-        return False
-    return float(np.mean(np.ptp(srgb, axis=-1) <= tolerance)) >= 0.99

@@ -85,14 +85,29 @@ def texture_ita(diffuse_srgb: np.ndarray) -> float:
     return ita_of_srgb(diffuse_srgb[mask])
 
 
-def texture_tone(diffuse_linear: np.ndarray, level_sigma: float | None) -> dict:
+def grayscale(srgb: np.ndarray, tolerance: float = 1.5 / 255) -> bool:
+    """Whether colours [..., 3] are grey (all channels equal within ``tolerance`` on 99 % of them)."""
+    srgb = np.asarray(srgb).reshape(-1, 3)
+    if len(srgb) == 0:
+        return False
+    return float(np.mean(np.ptp(srgb, axis=-1) <= tolerance)) >= 0.99
+
+
+GRAYSCALE_NOTE = "a grayscale photo shows no skin tone: the map's colour is the face model's mean skin"
+
+
+def texture_tone(diffuse_linear: np.ndarray, level_sigma: float | None, photo_srgb: np.ndarray | None = None) -> dict:
     """The tone of a diffuse map [H, W, 3] (linear RGB): its ITA, and the ITA intervals that the white level's
     one- and two-sigma spreads (``level_sigma``, natural log; None when no white level was estimated) allow.
+    None for all three, and a ``note``, when the fitted ``photo_srgb`` [H, W, 3] is grayscale: the map's colour is
+    then the model's, not the person's (a data set counting tones must not count it).
 
     A fit holds its brightest light to the white level W, so the map's level is the photo's over W: W brighter by
     exp(sigma) makes every texel exp(-sigma) as light (the map's colour stays). The interval is the ITA of the
     map's tone boxes scaled by exp(-sigma) and exp(+sigma); it covers W's level only, not the light's colour nor
     how the skin was read (docs/skin-tone.md)."""
+    if photo_srgb is not None and grayscale(photo_srgb):
+        return {"texture_ita": None, "ita_interval": None, "ita_interval_2sigma": None, "note": GRAYSCALE_NOTE}
     linear = np.clip(np.asarray(diffuse_linear, dtype=np.float64), 0.0, 1.0)
     texels = linear[texture_tone_mask(*linear.shape[:2])]
     record = {"texture_ita": round(ita_of_srgb(linear_to_srgb(texels)), 2), "ita_interval": None,

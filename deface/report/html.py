@@ -111,6 +111,8 @@ def _diffuse_caption(fit: FitOutput) -> str:
     tone = fit.skin_tone()
     source = fit.illuminant and (fit.illuminant.detail or fit.illuminant.source)
     where = f"; light level from {source}" if source else ""
+    if tone["texture_ita"] is None:
+        return f"diffuse (skin tone not measured: {tone['note']})"
     if tone["ita_interval"] is None:
         return f"diffuse (skin ITA {tone['texture_ita']:.0f}{where})"
     darker, lighter = tone["ita_interval"]

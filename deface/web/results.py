@@ -49,6 +49,8 @@ def fit_view(folder: Path) -> FitView:
 def tone_words(tone: dict | None, illuminant: dict | None) -> str:
     """The texture's skin tone (params.json ``skin_tone``) and how far the photo's unknown light level leaves it
     open, in words (markdown)."""
+    if tone and tone.get("texture_ita") is None and tone.get("note"):
+        return f"Skin tone: not measured ({tone['note']})."
     if not tone or tone.get("texture_ita") is None:
         return "Skin tone: not recorded for this fit."
     ita = tone["texture_ita"]
