@@ -107,3 +107,15 @@ def test_a_small_face_in_a_clip_is_tracked(photos):
     assert all(item is not None for item in tracked)
     centres = np.array([item.points.mean(0) for item in tracked])
     assert np.allclose(np.diff(centres[:, 0]), 6, atol=2) and np.all(np.abs(centres[:, 1] - 880) < 25)
+
+
+def test_two_small_faces_side_by_side_are_two_faces(photos):
+    """A small group: each box's crop also shows the neighbour; each crop gives the face it was cut around."""
+    face = (load_image(photos / "facenet-paul_rudd.png") * 255).astype(np.uint8)  # 160 x 160
+    canvas = np.full((1400, 2400, 3), (110, 120, 100), np.uint8)
+    canvas[600:760, 1000:1160] = face
+    canvas[600:760, 1200:1360] = face[:, ::-1]
+    first, second = detect_landmarks(canvas), detect_landmarks(canvas, face_index=1)
+    assert first.num_faces == 2
+    centres = sorted(float(item.points[:, 0].mean()) for item in (first, second))
+    assert 1000 < centres[0] < 1160 and 1200 < centres[1] < 1360

@@ -149,8 +149,9 @@ class FaceMeshDetector:
         for box in face_boxes(image):
             crop, origin, scale = _square_crop(image, box)
             found = self.raw_faces(crop)
-            if found:
-                points, depth = max(found, key=lambda face: _bbox_area(face[0]))
+            if found:  # the face the box was around, not a neighbour that the crop also shows
+                centre = np.array(crop.shape[1::-1], np.float32) / 2
+                points, depth = min(found, key=lambda face: float(np.linalg.norm(face[0].mean(0) - centre)))
                 faces.append((points / scale + origin, depth / scale))
         return faces
 
