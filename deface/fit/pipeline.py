@@ -40,7 +40,6 @@ from deface.priors.checker import CheckerUnavailable, checker_illuminant, find_c
 from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
 from deface.priors.illuminant import CARD_SOURCES, estimate_illuminant, known_illuminant
-from deface.render.camera import Camera
 from deface.runtime import keep_freed_memory
 from deface.texture.confidence import triangle_density
 
@@ -318,7 +317,7 @@ def _scene_face(face: PosedFace, target: FitTarget, frame: int, size: tuple[int,
     geometry = face.geometry(frame)
     camera = geometry.camera if target.framing.is_whole else target.framing.scene_camera(geometry.camera)
     if (camera.height, camera.width) != tuple(size):
-        camera = Camera(camera.focal * size[1] / camera.width, camera.rotation, camera.translation, size[1], size[0])
+        camera = camera.scaled(size[1] / camera.width, width=size[1], height=size[0])
     return face.renderer.rasterize(geometry.mesh, camera).mask.numpy() > 0
 
 

@@ -111,7 +111,7 @@ def _to_rgb_array(img: Image.Image) -> np.ndarray:
 
 def to_uint8(image: np.ndarray, srgb: bool) -> np.ndarray:
     """[H, W] or [H, W, C] linear float -> uint8, gamma-encoded when ``srgb``."""
-    image = np.array(image, dtype=np.float32)  # one copy, then in place: a photo decoded large is 16 MP
+    image = np.array(image, dtype=np.float32)  # one copy, then in place: a photo decoded large is up to 8 MP
     np.clip(np.nan_to_num(image, copy=False), 0.0, 1.0, out=image)
     if srgb:
         np.power(image, 1.0 / GAMMA, out=image)

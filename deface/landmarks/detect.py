@@ -141,7 +141,6 @@ class FaceMeshDetector:
                 return [(points / scale_xy - pad, depth / scale_xy[0]) for points, depth in faces]
         return []
 
-
     def _small_faces(self, image: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
         """Faces too small for Face Mesh's own detector: Face Mesh on a crop around each box the full-range
         detector finds (module doc)."""
