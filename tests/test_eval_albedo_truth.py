@@ -67,6 +67,19 @@ def test_colour_noise_sees_chroma_not_brightness():
     assert m.colour_noise(noisy, REGION) == pytest.approx(100 * 0.05 * np.sqrt(blur_loss), rel=0.1)
 
 
+def test_colour_error_sees_a_tint_at_any_scale_and_not_brightness():
+    rng = np.random.default_rng(4)
+    truth = _skin() * rng.uniform(0.6, 1.0, (S, S, 1))
+    assert m.colour_error(truth * 0.5, truth, REGION) == pytest.approx(0.0, abs=1e-9)  # darker, same colours
+    assert m.colour_error(truth * rng.uniform(0.5, 1.0, (S, S, 1)), truth, REGION) == pytest.approx(0.0, abs=1e-9)
+    tinted = truth.copy()
+    tinted[REGION] *= np.exp(0.1 * np.array([-1.0, 2.0, -1.0]) / np.sqrt(6))  # a green patch, 0.1 in log-chroma
+    assert m.colour_error(tinted, truth, REGION) == pytest.approx(10.0, rel=1e-6)
+    half = REGION & (np.arange(S)[None, :] < 130)  # the patch over part of the region: RMS of 10 and 0
+    assert m.colour_error(tinted, truth, REGION) > m.colour_error(np.where(half[..., None], tinted, truth), truth,
+                                                                   REGION) > 0
+
+
 def test_psnr_ssim():
     truth = _skin() * np.random.default_rng(3).uniform(0.6, 1.0, (S, S, 1))
     psnr, ssim = m.psnr_ssim(truth, truth, REGION)

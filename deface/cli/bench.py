@@ -183,8 +183,8 @@ def albedo_command(
     report: Annotated[Path | None, typer.Option(help="Also rewrite this set's section of this file.")] = None,
 ) -> None:
     """Fit renders of known albedo and score each diffuse map against the truth in UV: PSNR, SSIM, colour noise,
-    and per region (the set's masks) the darkness kept and the fine structure; report.md, results.json and
-    contact_sheet.png in OUTPUT."""
+    colour error, and per region (the set's masks) the darkness kept and the fine structure; report.md,
+    results.json and contact_sheet.png in OUTPUT."""
     from deface.eval.albedo_benchmark import (
         contact_sheet,
         read_truth_set,

@@ -90,7 +90,8 @@ def score_fit(fitted: np.ndarray, truth: np.ndarray, shown: np.ndarray, masks: d
     matched = measures.gain_matched(fitted, truth, reference)
     psnr, ssim = measures.psnr_ssim(matched, truth, shown)
     scores = {FACE: {"psnr": psnr, "ssim": ssim, "colour_noise": measures.colour_noise(matched, shown),
-                     "colour_noise_truth": measures.colour_noise(truth, shown), "texels": int(shown.sum())}}
+                     "colour_noise_truth": measures.colour_noise(truth, shown),
+                     "colour_error": measures.colour_error(matched, truth, shown), "texels": int(shown.sum())}}
     if photo is not None:
         seen = np.isfinite(photo).all(-1)
         photo_matched = measures.gain_matched(np.nan_to_num(photo), truth, reference & seen)
@@ -226,7 +227,8 @@ def summary_line(variant: str, figures: dict) -> str:
                         f" fine {v['fine_structure']:.2f}"
                         for r, v in figures.items() if r != FACE)
     return (f"{variant}: PSNR {face['psnr']:.2f} dB, SSIM {face['ssim']:.3f}, colour noise "
-            f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f}); {regions}")
+            f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f}), colour error "
+            f"{_cell(face.get('colour_error'))}; {regions}")
 
 
 def _mean(values: list[float]) -> float:
@@ -237,13 +239,15 @@ def _mean(values: list[float]) -> float:
 def report_markdown(renders: list[TruthRender], records: dict, title: str, command: str) -> str:
     """A section for BENCHMARKS.md: one row per variant and render, the variant's mean last."""
     regions = sorted({r for recs in records.values() for rec in recs.values() for r in rec["scores"]} - {FACE})
-    header = ["variant", "render", "light", "PSNR", "SSIM", "colour noise (truth)"]
+    header = ["variant", "render", "light", "PSNR", "SSIM", "colour noise (truth)", "colour error"]
     header += [f"{r} {m}" for r in regions for m in ("kept", "photo", "fine")]
     lines = [f"## Albedo against the truth: {title}", "", f"Regenerate: `{command}`", "",
              "The fitted diffuse map against the true albedo in UV at 256², over the texels the render shows (the"
              f" true surface within {MAX_ANGLE:.0f} degrees of facing the fitted camera), after one gain per channel"
              f" matched on the {REFERENCE} (deface/eval/albedo_measures.py). PSNR/SSIM of the sRGB maps; colour noise:"
-             " RMS chroma of the map's fine structure x100 (the truth's in brackets); kept: darkness kept,"
+             " RMS chroma of the map's fine structure x100 (the truth's in brackets); colour error: RMS of the map's"
+             " chroma less the truth's over the face, x100 (tints and fringes at any scale; 0 = the truth's colours);"
+             " kept: darkness kept,"
              " (1 - K_fit) / (1 - K_truth), K = the region's luminance over the reference's (1 = as dark as the"
              " truth, 0 = bleached to skin); photo: the same of the working photo read into UV through the fitted mesh,"
              " shading and all (about 1 or more where the photo shows the region dark; a map's kept well below its"
@@ -256,7 +260,7 @@ def report_markdown(renders: list[TruthRender], records: dict, title: str, comma
         for stem, light, scores in rows:
             face = scores[FACE]
             cells = [variant, stem, light, f"{face['psnr']:.2f}", f"{face['ssim']:.3f}",
-                     f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f})"]
+                     f"{face['colour_noise']:.2f} ({face['colour_noise_truth']:.2f})", _cell(face.get("colour_error"))]
             for region in regions:
                 values = scores.get(region, {})
                 cells += [_cell(values.get(m)) for m in ("darkness_kept", "photo_darkness", "fine_structure")]
