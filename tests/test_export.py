@@ -55,3 +55,28 @@ def test_staged_directory_keeps_the_previous_result_on_failure(tmp_path):
 def test_to_uint8_gamma_encodes_only_colour():
     assert to_uint8(np.array([0.5]), srgb=False)[0] == 128
     assert to_uint8(np.array([0.5]), srgb=True)[0] == round(0.5 ** (1 / 2.2) * 255)
+
+
+def test_params_lights_are_the_lights_as_rendered():
+    """A fitted light with a negative lobe is written as the renderer renders it: its radiance over the sphere is
+    (nearly) non-negative, and rendering the written light again changes nothing."""
+    import torch
+
+    from deface.export.outputs import light_record
+    from deface.render.renderer import Renderer
+    from deface.render.sh import RADIANCE_SAMPLES, fibonacci_sphere, sh_basis
+
+    bands = 3
+    lights = torch.zeros(3, bands * bands, 3)
+    lights[:, 0] = 1.0  # uniform radiance ...
+    lights[:, 2] = torch.tensor([2.5, 2.0, 1.5])  # ... minus a lobe below the face, more in red than in blue
+    renderer = Renderer()
+    basis = sh_basis(torch.as_tensor(fibonacci_sphere(RADIANCE_SAMPLES), dtype=torch.float32), bands)
+    assert (basis @ lights[1]).min() < -0.3  # the fitted light is negative somewhere
+    record = light_record(renderer, lights, [2, 0], bands)
+    assert record["kept"] == [2, 0] and set(record["sh"]) == {"0", "2"} and record["initial_count"] == 3
+    written = torch.tensor([record["sh"]["2"], record["sh"]["0"]])
+    np.testing.assert_allclose(written.numpy(), renderer.rendered_lights(lights[[2, 0]]).numpy(), rtol=1e-6)
+    assert (basis @ written[0]).min() > -0.05 * (basis @ written[0]).max()  # what is left of the lobe: ringing
+    np.testing.assert_allclose(renderer.rendered_lights(written).numpy(), written.numpy(), atol=0.05)
+    assert "clamped" in record["convention"]

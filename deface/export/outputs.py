@@ -7,6 +7,7 @@ textures/confidence.png                    how well the photo(s) constrain each 
 mesh.obj + mesh.mtl, mesh.glb              fitted mesh (cm; GLB in metres), a photo's expression; for a clip
                                            the identity with a neutral expression
 params.json, params.npz                    named parameters and the run record; large arrays in the npz
+                                           (params.json's lights as rendered: :func:`light_record`)
 render.png                                 I_out (sRGB): the whole photo at the working scale with the fitted
                                            face composited where M_o says so; for a clip under frames/<i>/
 render_face.png                            I_R (sRGB) over the working frame (the crop around the face)
@@ -86,10 +87,23 @@ def _write_renders(result: FitOutput, renders: list, folder: Path) -> None:
             save_png(base / "masks" / f"light_{light}.png", _np(rendered.light_masks[slot]), srgb=False)
 
 
+def light_record(renderer, lights, kept: list[int], bands: int) -> dict:
+    """params.json's ``lights``: each kept light's SH [B*B, 3] as the renderer renders it (negative radiance
+    clamped, ``render.non_negative_lights``), so another renderer shows the light the fit was rendered with. The
+    fitted coefficients themselves (``lights`` [n, B*B, 3], which may carry negative lobes the clamp takes off)
+    stay in params.npz for reloading."""
+    rendered = _np(renderer.rendered_lights(lights[kept])) if kept else np.zeros((0, bands * bands, 3))
+    clamped = renderer.config.non_negative_lights
+    return {"bands": bands, "kept": kept, "initial_count": int(lights.shape[0]),
+            "sh": {str(k): rendered[slot].tolist() for slot, k in enumerate(kept)},
+            "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame"
+                          + ("; as rendered: the band-limited SH of the fitted radiance clamped at 0 (deface.render.sh.non_negative),"
+                             " which rings a little below 0" if clamped else "")}
+
+
 def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) -> None:
     config, model = result.config, result.model
     kept = list(result.lights.kept)
-    lights = _np(result.lights.sh)
     params = {
         "format": "deface-params/1",
         "model": {"name": model.name, "expression_names": list(model.expression_names),
@@ -101,9 +115,7 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
                  "convention": "model -> camera; camera x right, y down, z forward (OpenCV)"},
         "camera": _camera(result, record.get("file_size")),
         "crop": result.framing.record(),
-        "lights": {"bands": config.lights.bands, "kept": kept, "initial_count": int(lights.shape[0]),
-                   "sh": {str(k): lights[k].tolist() for k in kept},
-                   "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame"},
+        "lights": light_record(result.renderer, result.lights.sh, kept, config.lights.bands),
         "textures": {"size": int(result.textures.diffuse.shape[0]),
                      "chosen_by": "config" if config.texture_size is not None else
                      "the face's pixels (texture_size none, texture_size_range)"},
