@@ -96,9 +96,9 @@ def light_record(renderer, lights, kept: list[int], bands: int) -> dict:
     clamped = renderer.config.non_negative_lights
     return {"bands": bands, "kept": kept, "initial_count": int(lights.shape[0]),
             "sh": {str(k): rendered[slot].tolist() for slot, k in enumerate(kept)},
-            "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame"
-                          + ("; as rendered: the band-limited SH of the fitted radiance clamped at 0 (deface.render.sh.non_negative),"
-                             " which rings a little below 0" if clamped else "")}
+            "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame" + (
+                "; as rendered: the band-limited SH of the fitted radiance clamped at 0 "
+                "(deface.render.sh.non_negative), which rings a little below 0" if clamped else "")}
 
 
 def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) -> None:
