@@ -68,16 +68,26 @@ def test_colour_noise_sees_chroma_not_brightness():
 
 
 def test_colour_error_sees_a_tint_at_any_scale_and_not_brightness():
+    """0 for the truth's colours at any lightness; a green patch scores its CIELAB a*b* shift, by an independent
+    colour-science conversion, in proportion to the share of the face it covers."""
+    import colour
+
     rng = np.random.default_rng(4)
     truth = _skin() * rng.uniform(0.6, 1.0, (S, S, 1))
-    assert m.colour_error(truth * 0.5, truth, REGION) == pytest.approx(0.0, abs=1e-9)  # darker, same colours
-    assert m.colour_error(truth * rng.uniform(0.5, 1.0, (S, S, 1)), truth, REGION) == pytest.approx(0.0, abs=1e-9)
+    assert m.colour_error(truth * 0.5, truth, REGION) == pytest.approx(0.0, abs=1e-6)  # darker, same colours
+    assert m.colour_error(truth * rng.uniform(0.3, 1.0, (S, S, 1)), truth, REGION) == pytest.approx(0.0, abs=1e-6)
+    green = np.array([0.9, 1.15, 0.9])
     tinted = truth.copy()
-    tinted[REGION] *= np.exp(0.1 * np.array([-1.0, 2.0, -1.0]) / np.sqrt(6))  # a green patch, 0.1 in log-chroma
-    assert m.colour_error(tinted, truth, REGION) == pytest.approx(10.0, rel=1e-6)
-    half = REGION & (np.arange(S)[None, :] < 130)  # the patch over part of the region: RMS of 10 and 0
-    assert m.colour_error(tinted, truth, REGION) > m.colour_error(np.where(half[..., None], tinted, truth), truth,
-                                                                   REGION) > 0
+    tinted[REGION] *= green
+    pixel = truth[REGION][0]
+    shifted = pixel * green * (pixel @ m.LUMINANCE) / ((pixel * green) @ m.LUMINANCE)
+    lab = [colour.XYZ_to_Lab(colour.sRGB_to_XYZ(colour.cctf_encoding(x))) for x in (shifted, pixel)]
+    expected = np.hypot(*(lab[0][1:] - lab[1][1:]))
+    assert expected > 3  # a visible tint
+    assert m.colour_error(tinted, truth, REGION) == pytest.approx(expected, rel=0.05)
+    half = REGION & (np.arange(S)[None, :] < 130)  # the patch over half the region: RMS sqrt(1/2) as large
+    assert m.colour_error(np.where(half[..., None], tinted, truth), truth, REGION) == pytest.approx(
+        expected * np.sqrt(half.sum() / REGION.sum()), rel=0.05)
 
 
 def test_psnr_ssim():

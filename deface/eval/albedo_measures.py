@@ -12,9 +12,11 @@ benchmark), so the map is first matched to the truth by one gain per channel ove
   256²): 1 when the map carries the truth's strokes and dots where they are, 0 when it carries none of them.
 - **colour noise**: the RMS chroma of a map's fine structure (each channel minus its blur, in log-chroma axes), x100,
   beside the truth's: a map whose fine structure has more colour than the truth's carries colour noise or fringes.
-- **colour error**: the RMS over the face of the difference between the matched map's and the truth's chroma (log-RGB
-  on the same two axes), x100: a map tinted where the lights' colours were wrong (green or magenta patches, a
-  fringe along a mask's edge, at any scale) scores high; a map of the truth's colours 0.
+- **colour error**: the RMS over the face of the CIELAB a*b* difference (D65) between the matched map and the truth,
+  the map first brought to the truth's luminance texel by texel: its chromaticity alone, at the lightness a viewer
+  sees it (about 2.3 is a just-noticeable difference): a map tinted where the lights' colours were wrong
+  (green or magenta patches, a fringe along a mask's edge, at any scale) scores high; a map of the truth's colours,
+  however light or dark, 0. Log-chromaticity would weigh a dark skin's errors several times a light one's.
 - **PSNR / SSIM** of the matched sRGB map against the truth's over the scored face.
 """
 
@@ -87,23 +89,21 @@ def colour_noise(image: np.ndarray, region: np.ndarray, sigma: float = FINE_SIGM
     projected on the two axes orthogonal to grey (red-green, yellow-blue)."""
     logs = np.log(np.maximum(image, FLOOR))
     fine = logs - np.stack([ndimage.gaussian_filter(logs[..., c], sigma, mode="nearest") for c in range(3)], -1)
-    fine_chroma = fine[region] @ CHROMA_AXES.T
-    return float(100 * np.sqrt((fine_chroma ** 2).sum(-1).mean()))
-
-
-CHROMA_AXES = np.array([[1.0, -1.0, 0.0], [0.5, 0.5, -1.0]]) / np.array([[np.sqrt(2.0)], [np.sqrt(1.5)]])
-"""Red-green and yellow-blue axes of log-RGB, unit length and orthogonal to grey."""
-
-
-def chroma(image: np.ndarray) -> np.ndarray:
-    """[..., 2] log-RGB chroma of a linear image [..., 3] on :data:`CHROMA_AXES`."""
-    return np.log(np.maximum(image, FLOOR)) @ CHROMA_AXES.T
+    axes = np.array([[1.0, -1.0, 0.0], [0.5, 0.5, -1.0]])
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    chroma = fine[region] @ axes.T
+    return float(100 * np.sqrt((chroma ** 2).sum(-1).mean()))
 
 
 def colour_error(fitted: np.ndarray, truth: np.ndarray, region: np.ndarray) -> float:
-    """RMS over ``region`` of the chroma difference of two linear maps, x100 (module doc)."""
-    difference = chroma(fitted[region]) - chroma(truth[region])
-    return float(100 * np.sqrt((difference ** 2).sum(-1).mean()))
+    """RMS over ``region`` of the a*b* difference of two linear maps at the truth's luminance (module doc)."""
+    from skimage.color import rgb2lab
+
+    ratio = luminance(truth[region]) / np.maximum(luminance(fitted[region]), FLOOR)
+    recoloured = fitted[region] * ratio[:, None]
+    lab_fitted, lab_truth = (rgb2lab(linear_to_srgb(np.clip(x, 0.0, 1.0))[None])[0]
+                             for x in (recoloured, truth[region]))
+    return float(np.sqrt(((lab_fitted[:, 1:] - lab_truth[:, 1:]) ** 2).sum(-1).mean()))
 
 
 def psnr_ssim(fitted: np.ndarray, truth: np.ndarray, region: np.ndarray) -> tuple[float, float]:
