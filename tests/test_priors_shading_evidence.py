@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from deface.priors.shading_evidence import ShadingEvidenceConfig, texture_weight
+from deface.priors.shading_evidence import ShadingEvidenceConfig, coherence, texture_weight
 
 SIZE, FACE_SIZE = 160, 150.0
 CONFIG = ShadingEvidenceConfig(strength=3.0, edges_as_shading=True)
@@ -97,3 +97,23 @@ def test_the_strength_sets_how_fast_the_weight_falls_with_the_face_s_typical_tex
     strong, mild = (texture_weight(image, FACE, FACE_SIZE, replace(CONFIG, strength=s)) for s in (0.75, 3.0))
     skin = (slice(10, 50), slice(20, 140))
     assert 0.2 < strong[skin].mean() < mild[skin].mean() < 0.95
+
+
+def test_coherence_is_one_along_an_edge_and_low_in_scattered_strokes():
+    rows = np.arange(SIZE)[:, None] * np.ones((1, SIZE))
+    edge = np.where(rows >= SIZE // 2, 1.0, 0.0)
+    fine = edge - ndimage.gaussian_filter(edge, 2.0)
+    along = coherence(fine, 4.0)[SIZE // 2 - 2:SIZE // 2 + 2, 20:-20]
+    assert along.min() > 0.99
+    strokes = ndimage.gaussian_filter(np.random.default_rng(3).standard_normal((SIZE, SIZE)), 0.7)
+    assert np.median(coherence(strokes - ndimage.gaussian_filter(strokes, 2.0), 4.0)) < 0.3
+
+
+def test_with_coherence_a_shadow_s_edge_keeps_its_weight_and_a_beard_does_not():
+    """The scattered strokes' energy stays texture; the straight edge's is taken off as shading (without the
+    step term)."""
+    image = _bearded_and_shadowed()
+    weight = texture_weight(image, FACE, FACE_SIZE, ShadingEvidenceConfig(strength=3.0, coherence_power=2.0))
+    assert weight[BAND][:, 20:140].mean() > 0.6
+    assert weight[100:130, 60:100].mean() < 0.05
+    assert weight[70:85, 20:40].mean() > 0.6

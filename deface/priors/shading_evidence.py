@@ -11,11 +11,14 @@ above, a moustache as a mask. With this weight on stage 2's photometric term, su
     energy = G_b * fine^2                        b = ``energy_scale`` x face size
     weight = exp(-energy / (strength x median energy over the face))
     (with ``edges_as_shading``: energy - k G_b * |g - G_3b * g|^2, g = grad (G_b * log Y), at least 0)
+    (with ``coherence_power`` p: energy x (1 - c)^p, c the coherence of fine's structure tensor over b)
 
 A cast shadow's sharp edge also leaves fine energy, along a band a few pixels wide, so the masks are fitted less
 along it. ``edges_as_shading`` (off) takes off what a step of the smoothed log luminance predicts (k: the ratio
 of the two for an ideal step, :func:`step_ratio`; hair's strokes average out at that scale); on the renders of
 known albedo it also took off a beard's energy under a key light, whose strokes' shading is a step too.
+``coherence_power`` asks instead how the fine residue is organised: a shadow's edge leaves it along one direction
+(coherence near 1), hair, stubble and freckles scatter it (near 0), whatever the shading across them.
 """
 
 from __future__ import annotations
@@ -47,6 +50,13 @@ class ShadingEvidenceConfig:
     """Take off the energy a step of log luminance (a cast shadow's edge) alone would leave, so shadow edges keep
     their weight. Off: on the renders of known albedo it also took a beard's energy off under a key light (its
     strokes' shading is a step too) and the beard went into the lights (docs/textures.md)."""
+    coherence_power: float = 0.0
+    """Take off the share of the fine energy that is organised along one direction (a cast shadow's edge, a curve)
+    rather than scattered (hair, stubble, freckles): the energy times (1 - coherence)^p, coherence the structure
+    tensor's (lambda1 - lambda2) / (lambda1 + lambda2) of the fine residue over ``energy_scale``. 0 = off: on the
+    renders of known albedo (randomly oriented stubble strokes) and the shadow pairs it helped (2 with strength 0.75:
+    pairs' synthesis +1 dB), but a real beard's hairs grow one way, so their energy went too and the real bearded
+    photos lost their beards (docs/textures.md)."""
     floor: float = 1e-3
     """Least linear luminance of the log (dark pixels' noise stays finite)."""
 
@@ -64,7 +74,17 @@ def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config
     reference = float(np.median(energy[inside])) if inside.any() else float(np.median(energy))
     if config.edges_as_shading:  # after the reference: it is the face's typical texture, steps and all
         energy = np.maximum(energy - step_energy(log_luminance, fine_scale, energy_scale), 0.0)
+    if config.coherence_power > 0:
+        energy = energy * (1.0 - coherence(fine, energy_scale)) ** config.coherence_power
     return np.exp(-energy / (config.strength * max(reference, 1e-12))).astype(np.float32)
+
+
+def coherence(fine: np.ndarray, scale: float) -> np.ndarray:
+    """[H, W] in [0, 1]: how much of ``fine``'s gradient energy around each pixel (a Gaussian of ``scale``) lies
+    along one direction: 1 along a straight edge, about 0 in scattered strokes and dots."""
+    gy, gx = np.gradient(fine)
+    xx, yy, xy = (ndimage.gaussian_filter(a, scale, mode="nearest") for a in (gx * gx, gy * gy, gx * gy))
+    return np.sqrt((xx - yy) ** 2 + 4 * xy * xy) / np.maximum(xx + yy, 1e-12)
 
 
 def step_energy(log_luminance: np.ndarray, fine_scale: float, energy_scale: float) -> np.ndarray:
