@@ -4,6 +4,7 @@ that detail-synth does not have (settings are chosen on detail-synth and reporte
 not by deface's Python:
 
     blender -b -P benchmarks/blender/detail_scenes.py -- OUT [--samples 64] [--only SCENE[,SCENE]] [--tones T[,T]]
+        [--beard painted|directional]
 
 Two splits, each in its own folder. Without ``--only``, the first: five scenes (leaves, hand, side, warmcool, top;
 ``/work/detail-report``). ``--only blinds,branch,brimside,fingers``: the second, which no setting is tuned on
@@ -121,6 +122,11 @@ BRIM = dict(radius=0.15, offset=(0.0, 0.0, 0.15), tilt=(10.0, 0.0))
 FINGERS = dict(spread=(-24.0, -8.0, 8.0, 24.0), turn=100.0)
 """The fingers scene's hand: the fingers fanned out by ``spread`` degrees, the hand turned ``turn`` degrees in its
 plane (fingers toward the face's left, across it), its fingers' middle over the scene's shadow point."""
+HAIRS = dict(seed=11, share=0.43, length=(4.0, 9.0), fan=35.0, spread=8.0, colour=(62, 46, 36))
+"""``--beard directional``: hairs seeded ``seed`` until they cover ``share`` of the beard mask (the painted beard's
+dark share), each ``length`` texels long (at 512²), pointing down in UV (v down) turned by up to ``fan`` degrees
+outward at the mask's sides, plus a Gaussian of ``spread`` degrees; dark brown (8-bit sRGB ``colour``, each hair x
+0.8-1.2 in linear)."""
 PATCHES = {"left_cheek": (-0.045, -0.01), "right_cheek": (0.045, -0.01), "forehead": (-0.025, 0.085)}
 """Offsets (right, up) from the head's centre of the skin patches whose sRGB means exposure.tsv lists."""
 
@@ -128,14 +134,16 @@ PATCHES = {"left_cheek": (-0.045, -0.01), "right_cheek": (0.045, -0.01), "forehe
 def arguments():
     args = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
     out = Path(args[0])
-    options = {"--samples": "64", "--only": ",".join(DEFAULT_SCENES), "--tones": ",".join(TONES)}
+    options = {"--samples": "64", "--only": ",".join(DEFAULT_SCENES), "--tones": ",".join(TONES), "--beard": "painted"}
     for flag, value in zip(args[1::2], args[2::2], strict=False):
         options[flag] = value
     scenes, tones = options["--only"].split(","), options["--tones"].split(",")
     for name in scenes + tones:
         if name not in SCENES and name not in TONES:
             raise SystemExit(f"detail_scenes.py: unknown scene or tone {name!r}")
-    return out, int(options["--samples"]), scenes, tones
+    if options["--beard"] not in ("painted", "directional"):
+        raise SystemExit(f"detail_scenes.py: --beard is painted or directional, not {options['--beard']!r}")
+    return out, int(options["--samples"]), scenes, tones, options["--beard"]
 
 
 # --- 8-bit RGB images as flat lists, top row first (Blender's pixels start at the bottom) ---
@@ -213,7 +221,39 @@ def transferred_albedo(tone, source):
     return size, out
 
 
-def write_truth(out, tones):
+def directional_beard(tone, size, values):
+    """``values`` (``tone``'s albedo, 8-bit sRGB) with the beard mask's texels repainted: the tone's base skin, then
+    short dark hairs that grow one way, as a real beard's do (down the chin and jaw, fanning outward from the
+    middle, each within a few degrees of its neighbours), until they cover :data:`HAIRS`' share of the mask. The
+    painted beard's strokes point every way; a fit that tells hair from a shadow's edge by how its texture is
+    organised must be tested on this one too."""
+    mask = read_rgb(DETAIL / "masks" / "beard.png")[2]
+    base = read_rgb(BASES / f"{tone}.png")[2]
+    inside = [mask[3 * i] > 127 for i in range(size * size)]
+    texels = [i for i, flag in enumerate(inside) if flag]
+    out = list(values)
+    for i in texels:
+        out[3 * i:3 * i + 3] = base[3 * i:3 * i + 3]
+    centre = sum(i % size for i in texels) / len(texels)
+    half = max(abs(i % size - centre) for i in texels)
+    rng = random.Random(HAIRS["seed"])
+    dark, target = set(), HAIRS["share"] * len(texels)
+    while len(dark) < target:
+        start = rng.choice(texels)
+        x, y = start % size, start // size
+        angle = math.radians(90.0 + HAIRS["fan"] * (x - centre) / half + rng.gauss(0.0, HAIRS["spread"]))
+        length = rng.uniform(*HAIRS["length"])
+        shade = rng.uniform(0.8, 1.2)
+        for step in range(int(2 * length) + 1):
+            px, py = int(round(x + 0.5 * step * math.cos(angle))), int(round(y + 0.5 * step * math.sin(angle)))
+            if 0 <= px < size and 0 <= py < size and inside[py * size + px]:
+                k = py * size + px
+                dark.add(k)
+                out[3 * k:3 * k + 3] = [to_level(to_linear(level) * shade) for level in HAIRS["colour"]]
+    return out
+
+
+def write_truth(out, tones, beard="painted"):
     for folder in ("albedo", "masks", "images"):
         (out / folder).mkdir(parents=True, exist_ok=True)
     shutil.copyfile(MESH, out / "mesh.obj")
@@ -225,6 +265,10 @@ def write_truth(out, tones):
         else:
             size, values = transferred_albedo(tone, TONES[tone])
             write_png(out / "albedo" / f"{tone}.png", size, size, values)
+        if beard == "directional":
+            (out / "albedo" / ".directional").touch()
+            size, _, values = read_rgb(out / "albedo" / f"{tone}.png")
+            write_png(out / "albedo" / f"{tone}.png", size, size, directional_beard(tone, size, values))
 
 
 # --- the scene ---
@@ -492,6 +536,14 @@ leaves with wide penumbrae, a hat brim's slanted shadow over the forehead and on
 over the nose, mouth and beard (a shadow on dark, textured albedo). What it cannot: real hair's geometry, real
 skin's subsurface scattering, or a camera's tone curve."""
         generated = "\nGenerated"
+    beard = ""
+    if (out / "albedo" / ".directional").exists():
+        only += " --beard directional"
+        beard = f"""
+   Then the beard mask's texels are repainted (`--beard directional`): the tone's base skin, then dark brown hairs
+   (sRGB {HAIRS['colour']}) {HAIRS['length'][0]:g}-{HAIRS['length'][1]:g} texels long that grow one way, as a real
+   beard's do: down, fanning up to {HAIRS['fan']:g} degrees outward at the sides, {HAIRS['spread']:g} degrees of
+   spread (seed {HAIRS['seed']}), until they cover {HAIRS['share']:.0%} of the mask (the painted beard's share)."""
     (out / "README.md").write_text(f"""{title}
 
 {intro}{generated} by `benchmarks/blender/detail_scenes.py` in the deface repository
@@ -503,7 +555,7 @@ How it was made:
    The features are moved per channel in linear RGB: new = new base x detail / old base, clipped to [0, 1], inside
    the union of `masks/beard.png`, `masks/freckles.png`, `masks/birthmark.png` and of every texel where detail-synth's
    map differs from its base by {DIFFERS}/255 or more (the moles), grown by one texel; elsewhere the new base as it
-   is. `masks/` and `mesh.obj` are detail-synth's (the same UV layout and geometry).
+   is. `masks/` and `mesh.obj` are detail-synth's (the same UV layout and geometry).{beard}
 2. Scene (Blender 3.4, Cycles, {samples} samples, no denoiser, Standard view transform, so the PNG holds plain sRGB):
    `mesh.obj` (cm) with a Principled BSDF (base colour = the albedo, specular 0.35, roughness 0.45, no subsurface),
    a grey wall ({WALL['reflectance']:.0%}) {WALL['distance']} m behind the head's centre, 85 mm lens at 1.1 m,
@@ -551,8 +603,8 @@ def _describe(settings):
 
 
 def main():
-    out, samples, scenes, tones = arguments()
-    write_truth(out, tones)
+    out, samples, scenes, tones, beard = arguments()
+    write_truth(out, tones, beard)
     for tone in tones:
         for name in scenes:
             render(out, tone, name, samples)
