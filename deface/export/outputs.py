@@ -33,6 +33,7 @@ from deface.export.mesh import TEXTURE_FILES, write_glb, write_obj
 from deface.fit.config import to_dict
 from deface.fit.output import FitOutput
 from deface.io.images import save_png, to_uint8
+from deface.render.renderer import Renderer
 
 PARAMS_FORMAT = 3
 """Version of ``params.npz`` (its ``format_version``): 2 holds everything :func:`deface.export.load.load_fit`
@@ -87,7 +88,7 @@ def _write_renders(result: FitOutput, renders: list, folder: Path) -> None:
             save_png(base / "masks" / f"light_{light}.png", _np(rendered.light_masks[slot]), srgb=False)
 
 
-def light_record(renderer, lights, kept: list[int], bands: int) -> dict:
+def light_record(renderer: Renderer, lights: torch.Tensor, kept: list[int], bands: int) -> dict:
     """params.json's ``lights``: each kept light's SH [B*B, 3] as the renderer renders it (negative radiance
     clamped, ``render.non_negative_lights``), so another renderer shows the light the fit was rendered with. The
     fitted coefficients themselves (``lights`` [n, B*B, 3], which may carry negative lobes the clamp takes off)
