@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import ndimage
+from skimage.color import rgb2lab
 from skimage.metrics import structural_similarity
 from skimage.transform import resize
 
@@ -97,8 +98,6 @@ def colour_noise(image: np.ndarray, region: np.ndarray, sigma: float = FINE_SIGM
 
 def colour_error(fitted: np.ndarray, truth: np.ndarray, region: np.ndarray) -> float:
     """RMS over ``region`` of the a*b* difference of two linear maps at the truth's luminance (module doc)."""
-    from skimage.color import rgb2lab
-
     ratio = luminance(truth[region]) / np.maximum(luminance(fitted[region]), FLOOR)
     recoloured = fitted[region] * ratio[:, None]
     lab_fitted, lab_truth = (rgb2lab(linear_to_srgb(np.clip(x, 0.0, 1.0))[None])[0]

@@ -93,13 +93,13 @@ def light_record(renderer: Renderer, lights: torch.Tensor, kept: list[int], band
     clamped, ``render.non_negative_lights``), so another renderer shows the light the fit was rendered with. The
     fitted coefficients themselves (``lights`` [n, B*B, 3], which may carry negative lobes the clamp takes off)
     stay in params.npz for reloading."""
-    rendered = _np(renderer.rendered_lights(lights[kept])) if kept else np.zeros((0, bands * bands, 3))
-    clamped = renderer.config.non_negative_lights
+    rendered = _np(renderer.rendered_lights(lights[kept]))
     return {"bands": bands, "kept": kept, "initial_count": int(lights.shape[0]),
             "sh": {str(k): rendered[slot].tolist() for slot, k in enumerate(kept)},
             "convention": "real orthonormal SH, index l*l+l+m, radiance towards the light, model frame" + (
                 "; as rendered: the band-limited SH of the fitted radiance clamped at 0 "
-                "(deface.render.sh.non_negative), which rings a little below 0" if clamped else "")}
+                "(deface.render.sh.non_negative), which rings a little below 0"
+                if renderer.config.non_negative_lights else "")}
 
 
 def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) -> None:
