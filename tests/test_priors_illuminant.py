@@ -10,11 +10,14 @@ import torch
 
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import (
+    RINGING_SHARE,
     colour_spread,
     exposure_term,
     front_directions,
     key_light_level,
     light_colour_term,
+    negative_radiance_loss,
+    negative_share,
     peak_white,
     white_response,
 )
@@ -26,7 +29,7 @@ from deface.priors.illuminant import (
     planckian_rgb,
     plausible_cct,
 )
-from deface.render.sh import sh_basis, white_light
+from deface.render.sh import fibonacci_sphere, sh_basis, white_light
 
 SIZE = 96
 
@@ -298,6 +301,42 @@ def test_colour_spread_is_zero_for_one_colour_and_grows_with_a_tinted_lobe():
     colour_spread(lights, directions).backward()
     stepped = (lights - 0.05 * lights.grad).detach()
     assert float(colour_spread(stepped, directions)) < float(spread)
+
+
+def test_negative_share_is_the_negative_part_of_the_radiance():
+    """0 for a physical light at any level, 1 for one negative everywhere, a Monte Carlo estimate over random
+    directions for a light with a negative lobe; a gradient step lowers it."""
+    light = white_light(5) * torch.tensor([1.2, 1.0, 0.7])
+    assert float(negative_share(light)[0]) == pytest.approx(0.0, abs=1e-8)
+    assert float(negative_share(-light)[0]) == pytest.approx(1.0, abs=1e-6)
+    lobed = light.clone()
+    lobed[0, 1:4] -= 2.0 * light[0, 0] * torch.tensor([1.0, 0.5, 0.7])[:, None]  # l = 1 lobes beyond the ambient
+    directions = torch.nn.functional.normalize(torch.randn(200_000, 3, generator=torch.Generator().manual_seed(0),
+                                                           dtype=torch.float64), dim=-1)
+    values = torch.einsum("nj,kjc->knc", sh_basis(directions, 5), lobed.double())
+    expected = (values.clamp_max(0).pow(2).mean(1) / values.pow(2).mean(1)).mean()
+    share = negative_share(lobed)[0]
+    assert 0.05 < float(share) < 0.95
+    assert float(share) == pytest.approx(float(expected), rel=0.02)
+    assert float(negative_share(lobed * 4.0)[0]) == pytest.approx(float(share), rel=1e-5)  # level-free
+    lights = lobed.clone().requires_grad_(True)
+    negative_share(lights).sum().backward()
+    assert float(negative_share((lights - 0.05 * lights.grad).detach())[0]) < float(share)
+
+
+def test_the_negative_radiance_loss_allows_a_sharp_lights_ringing():
+    """A 14-degree lobe (cos^32) fitted by 9 SH bands rings below 0 and costs nothing; a light mostly negative
+    costs its share beyond the ringing."""
+    directions = torch.as_tensor(fibonacci_sphere(4096))
+    lobe = (directions[:, 2].clamp_min(0) ** 32)[:, None].repeat(1, 3)
+    sharp = torch.linalg.lstsq(sh_basis(directions, 9), lobe).solution[None].float()
+    assert 0.0 < float(negative_share(sharp)[0]) <= RINGING_SHARE
+    assert float(negative_radiance_loss(sharp)) == 0.0
+    mostly_negative = -sharp
+    share = float(negative_share(mostly_negative)[0])
+    assert share > 0.5
+    loss = negative_radiance_loss(torch.cat([sharp, mostly_negative]))
+    assert float(loss) == pytest.approx((share - RINGING_SHARE) / 2, rel=1e-5)
 
 
 def test_the_level_prior_can_read_the_light_the_renderer_renders():

@@ -148,6 +148,11 @@ class Weights:
     hemisphere). Free RGB SH coefficients let one light be neutral facing the camera and blue or yellow facing
     down; the map then takes the opposite colour where such a normal is (under the brows, along a mask's edge).
     0 = off."""
+    negative_radiance: float = 0.0
+    """Stages 2 and 3: the kept lights' negative radiance (:func:`deface.losses.illuminant.negative_share`, the
+    share of a light's radiance that is negative over the sphere). Lights are non-negative; the renderer clamps
+    what the fit makes negative, so without it a light can be mostly negative and render a colour and a level
+    that the colour and level terms, which read the raw SH, never see. 0 = off."""
     albedo_prior: float = 1.0
     """mean(delta^2) of the albedo-model coefficients in stage 2."""
     identity_prior: float = 1e-3

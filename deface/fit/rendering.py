@@ -11,7 +11,13 @@ import torch
 
 from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, StageContext
-from deface.losses.illuminant import colour_spread, front_directions, scene_light_colour_loss, scene_light_level_loss
+from deface.losses.illuminant import (
+    colour_spread,
+    front_directions,
+    negative_radiance_loss,
+    scene_light_colour_loss,
+    scene_light_level_loss,
+)
 from deface.losses.photometric import photometric_loss
 from deface.render.frame import FrameCast, render_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
@@ -89,6 +95,14 @@ def light_colour_spread(context: StageContext) -> torch.Tensor:
     if weight <= 0:
         return torch.zeros(())
     return weight * colour_spread(context.scene.lights[context.decoupling.kept], front_directions())
+
+
+def negative_radiance(context: StageContext) -> torch.Tensor:
+    """The kept lights' negative radiance, weighted (0 when off)."""
+    weight = context.config.weights.negative_radiance
+    if weight <= 0:
+        return torch.zeros(())
+    return weight * negative_radiance_loss(context.scene.lights[context.decoupling.kept])
 
 
 def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:

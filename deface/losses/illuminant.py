@@ -22,7 +22,7 @@ import math
 import torch
 
 from deface.io.images import LUMINANCE
-from deface.render.sh import cosine_lobe_coefficients, sh_basis
+from deface.render.sh import cosine_lobe_coefficients, radiance, sh_basis
 
 SHARPNESS = 20.0
 KEY_QUANTILE = 0.9
@@ -86,6 +86,28 @@ def colour_spread(lights: torch.Tensor, directions: torch.Tensor) -> torch.Tenso
     mean = (weight[..., None] * chroma).sum(1) / total[:, None]  # [K, 3]
     spread = (weight * (chroma - mean[:, None]).pow(2).sum(-1)).sum(1) / total  # [K]
     return spread.mean()
+
+
+RINGING_SHARE = 0.05
+"""The negative share a sharp light needs: 9 SH bands fitted to a lobe of about 10 degrees (cos^64, the sharpest
+they draw) ring below 0 with about this share (:func:`negative_share`), and the renderer's clamp keeps the lobe."""
+
+
+def negative_share(lights: torch.Tensor) -> torch.Tensor:
+    """[K] how much of each light's [K, B*B, 3] radiance is negative: per channel, the mean square of its negative
+    part over the sphere as a share of its mean square, mean over the channels (0 for a light that is nowhere
+    negative, 1 for one negative everywhere). The denominator is held fixed, so a gradient lowers the negative part
+    rather than raising the rest."""
+    values = radiance(lights)  # [K, N, 3]
+    total = values.pow(2).mean(1).detach().clamp_min(1e-12)  # [K, 3]
+    return (values.clamp_max(0).pow(2).mean(1) / total).mean(1)
+
+
+def negative_radiance_loss(lights: torch.Tensor) -> torch.Tensor:
+    """The lights' negative share beyond the ringing of a sharp light (RINGING_SHARE), mean over the lights. The
+    renderer clamps negative radiance, so where a light is mostly negative its raw SH and what is rendered part, and
+    the colour and level terms, which read the raw SH, miss what the map is lit by (a green beard on the demo photo)."""
+    return (negative_share(lights) - RINGING_SHARE).clamp_min(0).mean()
 
 
 def key_light_level(lights: torch.Tensor, normals: torch.Tensor, region: torch.Tensor,

@@ -116,17 +116,23 @@ def _radiance_basis(bands: int) -> tuple[torch.Tensor, torch.Tensor]:
     return basis, torch.linalg.pinv(basis)
 
 
+def radiance(lights: torch.Tensor) -> torch.Tensor:
+    """[K, RADIANCE_SAMPLES, 3] the radiance of lights [K, B², 3] at RADIANCE_SAMPLES even directions."""
+    bands = int(round(math.sqrt(lights.shape[1])))
+    basis, _ = _radiance_basis(bands)
+    return torch.einsum("nj,kjc->knc", basis.to(lights), lights)
+
+
 def non_negative(lights: torch.Tensor) -> torch.Tensor:
     """Lights [K, B², 3] whose radiance is clamped at 0: the band-limited SH closest over the sphere (least
     squares) to max(L(w), 0), as NextFace clamps the environment map it renders its SH lights through. A light
     whose radiance is nowhere negative is returned as it is. Without it a fitted light's negative lobes
     subtract light (a specular reflection towards them darkens a downward-facing chin like a beard)."""
-    bands = int(round(math.sqrt(lights.shape[1])))
-    basis, inverse = (matrix.to(lights) for matrix in _radiance_basis(bands))
-    radiance = torch.einsum("nj,kjc->knc", basis, lights)
-    if bool((radiance >= 0).all()):
+    values = radiance(lights)
+    if bool((values >= 0).all()):
         return lights
-    return torch.einsum("jn,knc->kjc", inverse, radiance.clamp_min(0))
+    inverse = _radiance_basis(int(round(math.sqrt(lights.shape[1]))))[1].to(lights)
+    return torch.einsum("jn,knc->kjc", inverse, values.clamp_min(0))
 
 
 def white_light(bands: int, ambient: float = 0.7) -> torch.Tensor:
