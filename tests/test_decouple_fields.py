@@ -78,6 +78,23 @@ def test_fourier_option_changes_input_width_only():
     assert field(pixel_coordinates(2, 2)).shape == (2, 2, 3)
 
 
+def test_uniform_start_gives_every_light_an_equal_mask_until_a_gradient_splits_them():
+    torch.manual_seed(0)
+    field = LightMaskField(3, fourier_frequencies=4, uniform_start=True)
+    coords = pixel_coordinates(16, 16)
+    assert torch.allclose(field(coords), torch.full((16, 16, 3), 1.0 / 3.0))
+    left = coords[..., 0] < 0  # the photo says: light 0 on the left half, light 2 on the right
+    optimiser = torch.optim.Adam(field.parameters(), lr=0.01)
+    for _ in range(50):
+        masks = field(coords)
+        loss = -(masks[..., 0][left].log().mean() + masks[..., 2][~left].log().mean())
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    masks = field(coords).detach()
+    assert masks[..., 0][left].mean() > 0.6 and masks[..., 2][~left].mean() > 0.6
+
+
 def test_fourier_features_hold_the_input_and_sin_cos_octaves():
     coords = torch.tensor([[0.25, -0.5, 0.0]])
     encoded = fourier_features(coords, 2)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import torch
 from scipy import ndimage
@@ -90,14 +92,15 @@ def test_the_fits_masks_are_filled_only_when_asked_and_at_every_working_size():
     evidence[0, 10:30, 10:30] = 0.0
     coverage = torch.zeros(40, 40)
     coverage[4:36, 4:36] = 1.0
-    plain = Decoupling(DecoupleConfig(), num_lights=3, num_frames=1, size=(40, 40))
-    filled = Decoupling(DecoupleConfig(mask_fill=0.2), num_lights=3, num_frames=1, size=(40, 40))
+    drawn_masks = DecoupleConfig(uniform_start=False)  # f's random blobs: masks that vary, for the fill to change
+    plain = Decoupling(drawn_masks, num_lights=3, num_frames=1, size=(40, 40))
+    filled = Decoupling(replace(drawn_masks, mask_fill=0.2), num_lights=3, num_frames=1, size=(40, 40))
     filled.load_state_dict(plain.state_dict())
     for decoupling in (plain, filled):
         decoupling.set_evidence(evidence)
     with torch.no_grad():
         drawn, mine = plain.light_masks(0, coverage), filled.light_masks(0, coverage)
-    unset = Decoupling(DecoupleConfig(), num_lights=3, num_frames=1, size=(40, 40))
+    unset = Decoupling(drawn_masks, num_lights=3, num_frames=1, size=(40, 40))
     unset.load_state_dict(plain.state_dict())
     with torch.no_grad():
         assert torch.equal(unset.light_masks(0, coverage), drawn)  # mask_fill 0: f's masks as they are

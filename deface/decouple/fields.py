@@ -55,6 +55,7 @@ class LightMaskField(nn.Module):
         hidden: Sequence[int] = (16, 64, 64),
         negative_slope: float = 0.02,
         fourier_frequencies: int = 0,
+        uniform_start: bool = False,
     ):
         super().__init__()
         if num_lights < 1:
@@ -63,6 +64,9 @@ class LightMaskField(nn.Module):
         self.fourier_frequencies = fourier_frequencies
         in_dim = 3 * (1 + 2 * fourier_frequencies)
         self.mlp = _mlp([in_dim, *hidden, num_lights], negative_slope)
+        if uniform_start:  # every mask 1 / n until the photo's gradients split them
+            nn.init.zeros_(self.mlp[-1].weight)
+            nn.init.zeros_(self.mlp[-1].bias)
         self._kept: list[int] = list(range(num_lights))
 
     @property

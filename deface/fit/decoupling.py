@@ -25,7 +25,8 @@ class Decoupling(torch.nn.Module):
         width, height = size
         self.config = config
         self.light_field = (
-            LightMaskField(num_lights, hidden=config.hidden, fourier_frequencies=config.fourier_frequencies)
+            LightMaskField(num_lights, hidden=config.hidden, fourier_frequencies=config.fourier_frequencies,
+                           uniform_start=config.uniform_start)
             if config.light_masks
             else None
         )
