@@ -154,10 +154,11 @@ class Weights:
     down; the map then takes the opposite colour where such a normal is (under the brows, along a mask's edge).
     0 = off."""
     negative_radiance: float = 0.0
-    """Stages 2 and 3: the kept lights' negative radiance (:func:`deface.losses.illuminant.negative_share`, the
-    share of a light's radiance that is negative over the sphere). Lights are non-negative; the renderer clamps
-    what the fit makes negative, so without it a light can be mostly negative and render a colour and a level
-    that the colour and level terms, which read the raw SH, never see. 0 = off."""
+    """Stages 2 and 3: the kept lights' negative radiance beyond the ringing a sharp light needs
+    (:func:`deface.losses.illuminant.negative_radiance_loss`). The renderer clamps what the fit makes negative, so
+    without it a light can be mostly negative and render a colour that the colour terms, which read the raw SH,
+    never see (the demo photo's green beard). 0 = off: at 100 held-out renders lost 1.4 dB, a warm key with a cool
+    fill 4-5 (docs/textures.md "Lights without negative radiance")."""
     albedo_prior: float = 1.0
     """mean(delta^2) of the albedo-model coefficients in stage 2."""
     identity_prior: float = 1e-3
