@@ -94,11 +94,13 @@ class DecoupleConfig:
     On raw coordinates (0, the authors' (x, y, t)) f draws only smooth, blob-like masks, and the edges of blinds,
     fingers and leaves were baked into the texture; more octaves let the masks follow a beard (docs/design.md
     "Default preset")."""
-    uniform_start: bool = True
-    """f starts with every mask equal (its last layer zero), so the split of the face comes from the photo alone.
-    Off (the authors' code): PyTorch's random init draws random blobs, and where the photo says nothing of the
-    shading (a beard, the mouth) the split stays where the seed drew it: nextface-s1's beard was kept 0.60, 0.13 or
-    0.38 with seeds 0, 1, 2; with a uniform start 0.28-0.34 (docs/textures.md "f starts uniform")."""
+    uniform_start: bool = False
+    """f starts with every mask equal (its last layer zero), so the split of the face comes from the photo and not
+    the seed. Off (the authors' code): PyTorch's random init draws random blobs, and where the photo says nothing
+    of the shading (a beard, the mouth) the split stays where the seed drew it (nextface-s1's beard kept 0.60, 0.13
+    or 0.38 with seeds 0, 1, 2; uniform 0.28-0.34). Off by default: from a uniform start f gave the whole face to
+    one light on a held-out render, and its slanted brim went into the map (7 dB; docs/textures.md "f starts
+    uniform")."""
     mask_fill: float = 0.0
     """Gaussian (share of the working image's longer side) over which a light mask, at a pixel with little
     shading evidence (``shading_evidence``: a beard, a mole, a shadow's edge band), is taken from the pixels
@@ -515,7 +517,6 @@ PAPER = {
     "decouple.epsilon": 0.17,
     "decouple.clipped_as_bound": False,
     "decouple.fourier_frequencies": 0,
-    "decouple.uniform_start": False,
     "weights.landmarks": 1e-3,
     "weights.landmark_units": "pixels",
     "weights.diffuse_level": 0.0,
