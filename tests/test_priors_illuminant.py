@@ -365,7 +365,7 @@ def test_the_level_prior_can_read_the_light_the_renderer_renders():
         tone = ToneConfig(level_as_rendered=as_rendered)
         context = SimpleNamespace(
             config=SimpleNamespace(tone=tone), renderer=Renderer(RenderConfig()),
-            scene=SimpleNamespace(lights=light), decoupling=SimpleNamespace(kept=[0]),
+            kept_lights=light,
             inputs=SimpleNamespace(scene_light=SimpleNamespace(regions=[torch.ones(4, 4, dtype=torch.bool)],
                                                                illuminant=SimpleNamespace(white=np.full(3, white)))))
         rendered = SimpleNamespace(normals=torch.tensor([0.0, 0.0, 1.0]).expand(4, 4, 3))

@@ -41,7 +41,7 @@ def render_posed(context: StageContext, frame: int, textures: Textures, refresh_
     geometry = geometry or context.geometry(frame)
     transfer = _transfer(context, frame, geometry.mesh, refresh_shadows)
     output = render_frame(context.renderer, geometry.mesh, geometry.camera, textures,
-                          context.scene.lights[context.decoupling.kept], transfer)
+                          context.kept_lights, transfer)
     return compose(context, frame, output)
 
 
@@ -49,7 +49,7 @@ def render_cast(context: StageContext, frame: int, cast: FrameCast, textures: Te
                 face_region: torch.Tensor | None = None) -> tuple[FrameRender, RenderOutput]:
     """A frame's cast (stage 3's frozen frames) shaded with ``textures`` under the kept lights, composed; M_o
     stays ``face_region`` when given. Also the render's buffers."""
-    output = shade_frame(context.renderer, cast, textures, context.scene.lights[context.decoupling.kept])
+    output = shade_frame(context.renderer, cast, textures, context.kept_lights)
     return compose(context, frame, output, face_region), output
 
 
@@ -85,7 +85,7 @@ def scene_light_colour(context: StageContext) -> torch.Tensor:
     tone, light = context.config.tone, context.inputs.scene_light
     if not tone.scene_light_prior or light is None:
         return torch.zeros(())
-    lights = context.scene.lights[context.decoupling.kept]
+    lights = context.kept_lights
     return scene_light_colour_loss(lights, light.illuminant.white, tone.weight, tone.colour_sigma)
 
 
@@ -94,7 +94,7 @@ def light_colour_spread(context: StageContext) -> torch.Tensor:
     weight = context.config.weights.light_colour_spread
     if weight <= 0:
         return torch.zeros(())
-    return weight * colour_spread(context.scene.lights[context.decoupling.kept], front_directions())
+    return weight * colour_spread(context.kept_lights, front_directions())
 
 
 def negative_radiance(context: StageContext) -> torch.Tensor:
@@ -102,7 +102,7 @@ def negative_radiance(context: StageContext) -> torch.Tensor:
     weight = context.config.weights.negative_radiance
     if weight <= 0:
         return torch.zeros(())
-    return weight * negative_radiance_loss(context.scene.lights[context.decoupling.kept])
+    return weight * negative_radiance_loss(context.kept_lights)
 
 
 def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:
@@ -111,7 +111,7 @@ def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) 
     tone, light = context.config.tone, context.inputs.scene_light
     if not tone.scene_light_prior or light is None or light.regions is None or rendered.normals is None:
         return torch.zeros(())
-    lights = context.scene.lights[context.decoupling.kept]
+    lights = context.kept_lights
     lights = context.renderer.rendered_lights(lights) if tone.level_as_rendered else lights
     return scene_light_level_loss(lights, rendered.normals, light.regions[frame], light.illuminant.white,
                                   tone.weight, tone.exposure_sigma)

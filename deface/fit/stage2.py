@@ -137,7 +137,7 @@ def objective(context: StageContext, before_ace: bool, refresh_shadows: bool,
         total = total + terms.add("scene_light_level", rendering.scene_light_level(context, frame, rendered), per_frame)
     total = total / frames
     total = total + terms.add("sh_regulariser",
-                              weights.sh_regulariser * scene.lights[context.decoupling.kept].pow(2).mean())
+                              weights.sh_regulariser * context.kept_lights.pow(2).mean())
     total = total + terms.add("albedo_prior", weights.albedo_prior * scene.albedo.pow(2).mean())
     total = total + terms.add("identity_prior", weights.identity_prior * scene.identity.pow(2).mean())
     total = total + terms.add("expression_prior", weights.expression_prior * scene.expression.pow(2).mean())

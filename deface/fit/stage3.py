@@ -200,7 +200,7 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
     )
     transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.render.shadows else None
     cast = cast_frame(context.renderer, geometry.mesh, geometry.camera, transfer, context.config.render.supersampling)
-    output = shade_frame(context.renderer, cast, initial, context.scene.lights[context.decoupling.kept])
+    output = shade_frame(context.renderer, cast, initial, context.kept_lights)
     coverage = output.mask
     face_region = context.decoupling.face_region(frame, coverage, context.inputs.face_classifier[frame])
     reference = AlbedoReference(output.diffuse, output.specular, output.roughness)

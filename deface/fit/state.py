@@ -166,6 +166,11 @@ class StageContext:
         return self.face.renderer
 
     @property
+    def kept_lights(self) -> torch.Tensor:
+        """[K, B*B, 3] the SH coefficients of the lights ACE kept, in f's mask order."""
+        return self.face.scene.lights[self.decoupling.kept]
+
+    @property
     def topology(self) -> dict[str, torch.Tensor]:
         return self.face.topology
 

@@ -22,7 +22,7 @@ import math
 import torch
 
 from deface.io.images import LUMINANCE
-from deface.render.sh import cosine_lobe_coefficients, radiance, sh_basis
+from deface.render.sh import bands_of, cosine_lobe_coefficients, radiance, sh_basis
 
 SHARPNESS = 20.0
 KEY_QUANTILE = 0.9
@@ -40,7 +40,7 @@ def front_directions(count: int = 256) -> torch.Tensor:
 
 def white_response(lights: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
     """[K, N, 3] W_k(n) of lights [K, B*B, 3] at unit normals [N, 3]."""
-    bands = int(round(math.sqrt(lights.shape[1])))
+    bands = bands_of(lights)
     basis = sh_basis(directions.to(lights.dtype), bands) * cosine_lobe_coefficients(bands).to(lights) / math.pi
     return torch.einsum("nj,kjc->knc", basis, lights)
 

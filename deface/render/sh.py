@@ -116,10 +116,14 @@ def _radiance_basis(bands: int) -> tuple[torch.Tensor, torch.Tensor]:
     return basis, torch.linalg.pinv(basis)
 
 
+def bands_of(lights: torch.Tensor) -> int:
+    """B of lights [..., B², 3]."""
+    return int(round(math.sqrt(lights.shape[-2])))
+
+
 def radiance(lights: torch.Tensor) -> torch.Tensor:
     """[K, RADIANCE_SAMPLES, 3] the radiance of lights [K, B², 3] at RADIANCE_SAMPLES even directions."""
-    bands = int(round(math.sqrt(lights.shape[1])))
-    basis, _ = _radiance_basis(bands)
+    basis, _ = _radiance_basis(bands_of(lights))
     return torch.einsum("nj,kjc->knc", basis.to(lights), lights)
 
 
@@ -131,7 +135,7 @@ def non_negative(lights: torch.Tensor) -> torch.Tensor:
     values = radiance(lights)
     if bool((values >= 0).all()):
         return lights
-    inverse = _radiance_basis(int(round(math.sqrt(lights.shape[1]))))[1].to(lights)
+    inverse = _radiance_basis(bands_of(lights))[1].to(lights)
     return torch.einsum("jn,knc->kjc", inverse, values.clamp_min(0))
 
 
