@@ -5,6 +5,11 @@ Gaussian of 2 texels, deface/eval/albedo_measures.py) is correlated with the tru
 masks, on the texels the benchmark scores (the true surface seen within 70 degrees) that the fitted camera sees.
 The fitted map's own correlation is printed beside it (from the fit's scores.json).
 
+Then the PSNR that is left to gain below a scale: the map's gain-matched PSNR against the truth over the same
+texels, and the PSNR of the map (and of the photo in UV) after an oracle has taken out every error coarser than a
+Gaussian of ``ORACLE_SIGMAS`` texels (the map times the truth's blur over the map's blur, both over the scored
+texels): what perfect shading and tone at those scales would give, the rest being registration and detail.
+
     .venv/bin/deface bench albedo ../shared/data/detail-synth -o OUT [--set ...]
     .venv/bin/python benchmarks/photo_detail.py ../shared/data/detail-synth OUT
 """
@@ -16,14 +21,27 @@ import json
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 from deface.eval import albedo_measures as measures
-from deface.eval.albedo_benchmark import photo_in_uv, read_truth_set, region_masks, shown_texels
+from deface.eval.albedo_benchmark import REFERENCE, photo_in_uv, read_truth_set, region_masks, shown_texels
 from deface.export.load import load_fit
 from deface.io.images import load_image, srgb_to_linear
 from deface.models.ict_build import read_obj
 
 REGIONS = ("beard", "freckle_area")
+ORACLE_SIGMAS = (4, 8, 16)
+
+
+def coarse_oracle(image: np.ndarray, truth: np.ndarray, texels: np.ndarray, sigma: float) -> np.ndarray:
+    """``image`` [S, S, 3] with its errors coarser than a Gaussian of ``sigma`` texels taken out by the ``truth``:
+    image x blur(truth) / blur(image), each blur a normalised convolution over ``texels`` [S, S]."""
+    def blur(values: np.ndarray) -> np.ndarray:
+        weight = ndimage.gaussian_filter(texels.astype(np.float64), sigma)[..., None]
+        spread = np.stack([ndimage.gaussian_filter(values[..., c] * texels, sigma) for c in range(3)], -1)
+        return spread / np.maximum(weight, 1e-6)
+
+    return image * blur(truth) / np.maximum(blur(image), 1e-6)
 
 
 def main() -> None:
@@ -49,6 +67,21 @@ def main() -> None:
                      f"map {scores.get(name, {}).get('fine_structure', float('nan')):5.2f}" for name in REGIONS]
             size = "x".join(map(str, fit.framing.size))
             print(f"  {render.stem:12s} working {size:9s} " + " | ".join(cells))
+            fitted = measures.at_score_size(srgb_to_linear(load_image(folder / "textures" / "diffuse.png"))
+                                            .astype(np.float64))
+            print("  " + " " * 12 + psnr_line(fitted, np.nan_to_num(photo), truth, shown, masks))
+
+
+def psnr_line(fitted: np.ndarray, photo: np.ndarray, truth: np.ndarray, shown: np.ndarray, masks: dict) -> str:
+    """The map's gain-matched PSNR, and the map's and photo's with the truth's coarse scales (module doc)."""
+    reference = masks[REFERENCE] & shown
+    psnr = measures.psnr_ssim(measures.gain_matched(fitted, truth, reference), truth, shown)[0]
+    cells = [f"PSNR map {psnr:5.2f}"]
+    for sigma in ORACLE_SIGMAS:
+        mine, read = (measures.psnr_ssim(coarse_oracle(image, truth, shown, sigma), truth, shown)[0]
+                      for image in (fitted, photo))
+        cells.append(f"coarser than {sigma:2d}: map {mine:5.2f} photo {read:5.2f}")
+    return " | ".join(cells)
 
 
 if __name__ == "__main__":
