@@ -11,17 +11,14 @@ import torch
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import (
     RINGING_SHARE,
-    TINT_SMOOTHNESS,
     colour_spread,
     exposure_term,
     front_directions,
-    green_magenta,
     key_light_level,
     light_colour_term,
     negative_radiance_loss,
     negative_share,
     peak_white,
-    tint_variation,
     white_response,
 )
 from deface.priors.illuminant import (
@@ -378,45 +375,3 @@ def test_the_level_prior_can_read_the_light_the_renderer_renders():
     assert level_term(True, 0.4) == pytest.approx(expected, rel=0.1, abs=1e-3)
     assert level_term(True, rendered_level) < 0.01  # held where the rendered light is
     assert level_term(False, rendered_level) > 1.0  # the raw SH's level is far below it
-
-
-def _two_lights_split_down_the_middle(first: torch.Tensor, second: torch.Tensor, size: int = 16):
-    """(lights [2, 9, 3], camera-facing normals [S, S, 3], masks [2, S, S] splitting the image at its middle
-    column, a region over all of it)."""
-    normals = torch.zeros(size, size, 3)
-    normals[..., 2] = 1.0
-    left = torch.zeros(size, size)
-    left[:, : size // 2] = 1.0
-    return torch.cat([first, second]), normals, torch.stack([left, 1.0 - left]), torch.ones(size, size)
-
-
-def test_tint_variation_costs_a_green_magenta_step_at_a_masks_edge_and_nothing_along_the_locus():
-    """Two lights of one tint at any levels meeting at a mask's edge cost nothing, a 3200 K key beside a 9000 K fill
-    (along the Planckian locus) almost nothing, a greener light its step across the locus (the Charbonnier of the
-    log step) per edge pixel, over the region's pixels; a gradient step on the masks softens it."""
-    neutral, size = white_light(3), 16
-    lights, normals, masks, region = _two_lights_split_down_the_middle(neutral, neutral * 3.0, size)
-    assert float(tint_variation(lights, normals, masks, region)) == pytest.approx(0.0, abs=1e-7)
-    green = neutral * torch.tensor([1.0, 1.25, 1.0])
-    lights, normals, masks, region = _two_lights_split_down_the_middle(neutral, green, size)
-    step = float(green_magenta(torch.tensor([1.0, 1.25, 1.0])) - green_magenta(torch.ones(3)))
-    assert step > 0.2  # R/G and B/G both fall by log 1.25: greener
-    expected = size * (math.sqrt(step**2 + TINT_SMOOTHNESS**2) - TINT_SMOOTHNESS) / (size * size)
-    assert float(tint_variation(lights, normals, masks, region)) == pytest.approx(expected, rel=1e-3)
-    assert float(tint_variation(lights, normals, masks, torch.zeros(size, size))) == 0.0
-    soft = masks.clone().requires_grad_(True)
-    tint_variation(lights, normals, soft, region).backward()
-    stepped = (soft - 0.5 * soft.grad / soft.grad.abs().max()).clamp(0, 1).detach()
-    assert float(tint_variation(lights, normals, stepped, region)) < expected
-    warm, cool = (neutral * torch.as_tensor(planckian_rgb(k), dtype=torch.float32) for k in (3200.0, 9000.0))
-    lights, normals, masks, region = _two_lights_split_down_the_middle(warm, cool, size)
-    assert float(tint_variation(lights, normals, masks, region)) < 0.05 * expected
-
-
-@pytest.mark.parametrize("cct", [2600.0, 3200.0, 4500.0, 6504.0, 9000.0, 11500.0])
-def test_green_magenta_is_zero_on_the_planckian_locus_at_any_level(cct):
-    """A Planckian light lies on the locus (within the cubic's 0.0011) whatever its level; greener is positive."""
-    light = torch.as_tensor(planckian_rgb(cct), dtype=torch.float32)
-    for level in (0.2, 1.0, 5.0):
-        assert float(green_magenta(light * level)) == pytest.approx(0.0, abs=2e-3)
-    assert float(green_magenta(light * torch.tensor([1.0, 1.1, 1.0]))) > 0.05

@@ -161,11 +161,6 @@ class Weights:
     without it a light can be mostly negative and render a colour that the colour terms, which read the raw SH,
     never see (the demo photo's green beard). 0 = off: at 100 held-out renders lost 1.4 dB, a warm key with a cool
     fill 4-5 (docs/textures.md "Lights without negative radiance")."""
-    tint_variation: float = 0.0
-    """Stages 2 and 3: how sharply the light on the face may change tint across the Planckian locus
-    (:func:`deface.losses.illuminant.tint_variation`, green-magenta steps of the masked irradiance between
-    neighbouring pixels). Two lights of different tint meeting at a mask's edge leave the opposite tint in the map
-    (the green and pink fringes at the demo photo's lips). 0 = off."""
     albedo_prior: float = 1.0
     """mean(delta^2) of the albedo-model coefficients in stage 2."""
     identity_prior: float = 1e-3

@@ -17,7 +17,6 @@ from deface.losses.illuminant import (
     negative_radiance_loss,
     scene_light_colour_loss,
     scene_light_level_loss,
-    tint_variation,
 )
 from deface.losses.photometric import photometric_loss
 from deface.render.frame import FrameCast, render_frame, shade_frame
@@ -104,15 +103,6 @@ def negative_radiance(context: StageContext) -> torch.Tensor:
     if weight <= 0:
         return torch.zeros(())
     return weight * negative_radiance_loss(context.kept_lights)
-
-
-def light_tint_variation(context: StageContext, rendered: FrameRender) -> torch.Tensor:
-    """How sharply the masked light's tint changes across the face, weighted (0 when off)."""
-    weight = context.config.weights.tint_variation
-    if weight <= 0 or rendered.normals is None:
-        return torch.zeros(())
-    lights = context.renderer.rendered_lights(context.kept_lights)
-    return weight * tint_variation(lights, rendered.normals.detach(), rendered.light_masks, rendered.face_region)
 
 
 def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:

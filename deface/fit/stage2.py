@@ -135,7 +135,6 @@ def objective(context: StageContext, before_ace: bool, refresh_shadows: bool,
                                   per_frame)
         total = total + _decoupling_terms(context, frame, rendered, before_ace, terms, per_frame)
         total = total + terms.add("scene_light_level", rendering.scene_light_level(context, frame, rendered), per_frame)
-        total = total + terms.add("tint_variation", rendering.light_tint_variation(context, rendered), per_frame)
     total = total / frames
     total = total + terms.add("sh_regulariser",
                               weights.sh_regulariser * context.kept_lights.pow(2).mean())

@@ -261,7 +261,6 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, s
     loss = terms.add("photometric", weights.photometric * _photometric(context, frame.index, rendered,
                                                                        setup.held_out, errors), scale)
     loss = loss + terms.add("scene_light_level", rendering.scene_light_level(context, frame.index, rendered), scale)
-    loss = loss + terms.add("tint_variation", rendering.light_tint_variation(context, rendered), scale)
     if context.decoupling.light_field is not None and rendered.light_masks.shape[0] > 1:
         loss = loss + terms.add("binary", weights.binary * decouple_losses.binary_loss(
             rendered.light_masks, rendered.coverage, form=form), scale)

@@ -17,11 +17,8 @@ lights that start negative (the paper's initialisation) still get gradients.
 
 from __future__ import annotations
 
-import functools
 import math
-from dataclasses import dataclass
 
-import numpy as np
 import torch
 
 from deface.io.images import LUMINANCE
@@ -104,74 +101,6 @@ def negative_share(lights: torch.Tensor) -> torch.Tensor:
     values = radiance(lights)  # [K, N, 3]
     total = values.pow(2).mean(1).detach().clamp_min(1e-12)  # [K, 3]
     return (values.clamp_max(0).pow(2).mean(1) / total).mean(1)
-
-
-TINT_FLOOR = 1e-4
-"""Least channel value :func:`green_magenta` reads (a light that renders no red there has no tint to speak of)."""
-TINT_SMOOTHNESS = 0.01
-"""Charbonnier scale of :func:`tint_variation` (log units): steps larger than this cost their size."""
-
-
-@dataclass(frozen=True)
-class PlanckianLocus:
-    """The Planckian locus from 2500 to 12000 K in log-chromaticity (log R/G, log B/G of linear sRGB) as a cubic
-    about its principal line: offset(t) across the line at t along it (within 0.0011 in log)."""
-
-    origin: tuple[float, float]
-    along: tuple[float, float]  # unit
-    across: tuple[float, float]  # unit, towards green (R/G and B/G both lower)
-    cubic: tuple[float, float, float, float]  # offset(t), highest power first
-    span: tuple[float, float]  # the t the cubic was fitted over
-
-
-@functools.cache
-def planckian_locus() -> PlanckianLocus:
-    """The locus as :class:`PlanckianLocus`, from the project's Planckian colours (24 temperatures)."""
-    from deface.priors.illuminant import planckian_rgb
-
-    logs = np.log([planckian_rgb(cct) for cct in np.geomspace(2500.0, 12000.0, 24)])
-    chroma = logs[:, [0, 2]] - logs[:, 1:2]
-    origin = chroma.mean(0)
-    along = np.linalg.svd(chroma - origin)[2][0]
-    across = np.array([-along[1], along[0]])
-    across = across if across.sum() < 0 else -across
-    t, offset = (chroma - origin) @ along, (chroma - origin) @ across
-    return PlanckianLocus(tuple(origin), tuple(along), tuple(across), tuple(np.polyfit(t, offset, 3)),
-                          (float(t.min()), float(t.max())))
-
-
-def green_magenta(rgb: torch.Tensor) -> torch.Tensor:
-    """[...] how far the colour ``rgb`` [..., 3] lies off the Planckian locus (:func:`planckian_locus`), in log
-    chromaticity: positive green, negative magenta, 0 for daylight, a sky, a lamp or a candle at any level."""
-    log_rgb = torch.log(rgb.clamp_min(TINT_FLOOR))  # not _positive: its softening tints dim colours
-    locus = planckian_locus()
-    red = log_rgb[..., 0] - log_rgb[..., 1] - locus.origin[0]
-    blue = log_rgb[..., 2] - log_rgb[..., 1] - locus.origin[1]
-    t = (red * locus.along[0] + blue * locus.along[1]).clamp(*locus.span)
-    offset = red * locus.across[0] + blue * locus.across[1]
-    a, b, c, d = locus.cubic
-    return offset - (((a * t + b) * t + c) * t + d)
-
-
-def tint_variation(lights: torch.Tensor, normals: torch.Tensor, masks: torch.Tensor,
-                   region: torch.Tensor) -> torch.Tensor:
-    """How sharply the light on the face changes tint across the Planckian locus: the irradiance S = sum_k m_k W_k(n)
-    of ``lights`` [K, B*B, 3] (as rendered) at ``normals`` [H, W, 3] under ``masks`` [K, H, W], and the mean over
-    neighbouring pixels of ``region`` [H, W] (> 0.5) of a Charbonnier step of its :func:`green_magenta` (about
-    |step| beyond ``TINT_SMOOTHNESS``). Light bounced off skin tints the face magenta smoothly; a sharp green or
-    magenta step is two lights of different tint meeting at a mask's edge, or one light's colour changing with
-    direction, and the map takes the opposite step (a fringe)."""
-    inside = region > 0.5
-    if int(inside.sum()) < 2:
-        return torch.zeros(())
-    response = white_response(lights, normals[inside])  # [K, N, 3]
-    irradiance = torch.einsum("kn,knc->nc", masks[:, inside], response)
-    tint = torch.zeros(inside.shape, dtype=irradiance.dtype).masked_scatter(inside, green_magenta(irradiance))
-    steps = [tint[1:] - tint[:-1], tint[:, 1:] - tint[:, :-1]]
-    valid = [inside[1:] & inside[:-1], inside[:, 1:] & inside[:, :-1]]
-    total = sum(((step[ok].pow(2) + TINT_SMOOTHNESS**2).sqrt() - TINT_SMOOTHNESS).sum()
-                for step, ok in zip(steps, valid, strict=True))
-    return total / max(int(inside.sum()), 1)
 
 
 def negative_radiance_loss(lights: torch.Tensor) -> torch.Tensor:
