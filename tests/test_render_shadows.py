@@ -93,28 +93,3 @@ def test_cache_refreshes_only_beyond_tolerance():
     moved[5, 2] += 0.2
     assert cache.get(Mesh(moved, mesh.triangles, mesh.uvs, mesh.triangle_uvs)) is not first
     assert cache.refreshes == 2
-
-
-def test_interreflection_adds_light_bounced_off_the_mesh_as_a_geometric_series():
-    """What the plate hides from the ground is taken for a surface lit as the ground is: each vertex's irradiance
-    becomes its direct part over 1 - rho (1 - v) per channel (v its unoccluded fraction). Nothing changes where
-    nothing is hidden or the albedo is black; a red albedo bounces more red."""
-    bands = 3
-    mesh = scene()
-    sh = torch.zeros(1, bands * bands, 3, dtype=torch.float64)
-    sh[0, 0] += 1.5
-    sh[0, 2] += 1.0
-    transfer = Renderer(RenderConfig(shadow_rays=256), bands=bands).shadow_transfer(mesh)
-    direct = vertex_irradiance(mesh, sh, transfer)[:, 0]  # [V, 3]
-    albedo = torch.tensor([0.6, 0.4, 0.3], dtype=torch.float64)
-    bounced = vertex_irradiance(mesh, sh, transfer, bounce_albedo=albedo)[:, 0]
-    hidden = 1.0 - transfer.visibility.to(torch.float64)[:, None]
-    assert torch.allclose(bounced, direct / (1.0 - albedo * hidden), rtol=1e-10)
-    open_sky = transfer.visibility >= 1.0
-    assert open_sky.any() and torch.equal(bounced[open_sky], direct[open_sky])
-    assert torch.equal(vertex_irradiance(mesh, sh, transfer, bounce_albedo=torch.zeros(3))[:, 0], direct)
-    under = (transfer.visibility < 0.7) & (direct[:, 1] > 0)
-    assert under.sum() > 10, "the plate should hide part of the sky from some of the ground"
-    gain = bounced[under] / direct[under]
-    assert bool((gain[:, 0] > gain[:, 1]).all() and (gain[:, 1] > gain[:, 2]).all() and (gain[:, 2] > 1).all())
-    assert torch.equal(vertex_irradiance(mesh, sh, None, bounce_albedo=albedo), vertex_irradiance(mesh, sh, None))

@@ -62,12 +62,6 @@ class RenderConfig:
     authors' renderer (NextFace) clamps the environment map it renders the SH through. Off: the SH as it is, whose
     negative lobes let a light subtract radiance (a fitted light darkened a chin through its specular reflection
     to explain a beard)."""
-    interreflection: bool = False
-    """Light bounced off the face itself (with ``shadows``): what the mesh hides from a vertex is other skin, lit
-    as the vertex is, so each light's irradiance is its direct part over 1 - rho (1 - v) per channel (every
-    bounce, a geometric series), with v the cosine-weighted unoccluded fraction and rho the diffuse map's mean.
-    Skin reflects skin-coloured light into the eye sockets, the nostrils and under the chin; without it the fit's
-    lights take that colour."""
     render_blur: bool = False
     """Fit: L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
     their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
@@ -246,9 +240,6 @@ class Renderer:
         used, local = kernels.renumber(corners, mesh.num_vertices)  # [U], [N, 3]
         normals_v = mesh.vertex_normals().index_select(0, used).to(dtype)  # [U, 3]
         irradiance_v = _vertex_irradiance(normals_v, coeffs, bands, transfer, used)  # [U, K*3]
-        if self.config.interreflection and transfer is not None:
-            albedo = textures.diffuse.detach().reshape(-1, 3).mean(0)  # a colour of the face, not a texel's to fit
-            irradiance_v = irradiance_v + _bounced(irradiance_v, transfer, used, albedo)
 
         uv_corners = mesh.triangle_uvs.index_select(0, fragments.covered_triangles)  # [N, 3]
         camera_z = camera.to_camera(mesh.vertices.index_select(0, used))[:, 2:].to(dtype)  # [U, 1]
@@ -299,11 +290,8 @@ class Renderer:
         )
 
 
-def vertex_irradiance(mesh: Mesh, sh_lights: torch.Tensor, transfer: ShadowTransfer | None = None,
-                      bounce_albedo: torch.Tensor | None = None) -> torch.Tensor:
-    """Per-vertex SH irradiance [V, K, 3]: analytic unshadowed term minus the occluded transfer (if given), and
-    with ``bounce_albedo`` [3] the light the mesh reflects onto itself (RenderConfig.interreflection, as
-    :meth:`Renderer.shade` adds it with the diffuse map's mean).
+def vertex_irradiance(mesh: Mesh, sh_lights: torch.Tensor, transfer: ShadowTransfer | None = None) -> torch.Tensor:
+    """Per-vertex SH irradiance [V, K, 3]: analytic unshadowed term minus the occluded transfer (if given).
 
     E_v = sum_lm A_l c_lm Y_lm(n_v) - sum_lm c_lm O_v[lm]; Lambertian radiance is albedo / pi * E.
     """
@@ -311,10 +299,7 @@ def vertex_irradiance(mesh: Mesh, sh_lights: torch.Tensor, transfer: ShadowTrans
     num_lights = sh_lights.shape[0]
     coeffs = sh_lights.permute(1, 0, 2).reshape(bands * bands, num_lights * 3)
     normals = mesh.vertex_normals().to(sh_lights.dtype)
-    irradiance = _vertex_irradiance(normals, coeffs, bands, transfer)
-    if bounce_albedo is not None and transfer is not None:
-        irradiance = irradiance + _bounced(irradiance, transfer, None, bounce_albedo)
-    return irradiance.reshape(-1, num_lights, 3)
+    return _vertex_irradiance(normals, coeffs, bands, transfer).reshape(-1, num_lights, 3)
 
 
 def _vertex_irradiance(
@@ -332,20 +317,6 @@ def _vertex_irradiance(
     if transfer is not None:
         _check_transfer(transfer, bands, normals.shape[0] if subset is None else None)
     return kernels.sh_irradiance(normals, coeffs, lobe, transfer, subset)
-
-
-def _bounced(irradiance: torch.Tensor, transfer: ShadowTransfer, subset: torch.Tensor | None,
-             albedo: torch.Tensor) -> torch.Tensor:
-    """[U, K*3] the irradiance the face reflects onto its own vertices (RenderConfig.interreflection), given
-    their direct ``irradiance`` [U, K*3] (``subset`` [U] of the transfer's vertices; None: all of them): what the
-    mesh hides from a vertex is taken for a surface of ``albedo`` [3] lit as the vertex is, so E = E_direct +
-    albedo (1 - v) E, i.e. E_direct times albedo (1 - v) / (1 - albedo (1 - v)) more. Exact for a closed cavity of
-    one albedo under a uniform light (a furnace), where every surface is lit alike."""
-    visibility = transfer.visibility.to(irradiance)
-    hidden = (1.0 - (visibility if subset is None else visibility.index_select(0, subset)))[:, None]  # [U, 1]
-    gain = albedo.to(irradiance) * hidden / (1.0 - albedo.to(irradiance) * hidden)  # [U, 3]
-    lights = irradiance.shape[1] // 3
-    return (irradiance.reshape(-1, lights, 3) * gain[:, None]).reshape(-1, lights * 3)
 
 
 def _check_transfer(transfer: ShadowTransfer, bands: int, num_vertices: int | None) -> None:
