@@ -21,10 +21,10 @@ import json
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from deface.eval import albedo_measures as measures
 from deface.eval.albedo_benchmark import REFERENCE, photo_in_uv, read_truth_set, region_masks, shown_texels
+from deface.eval.uv_measure import local_mean
 from deface.export.load import load_fit
 from deface.io.images import load_image, srgb_to_linear
 from deface.models.ict_build import read_obj
@@ -35,13 +35,8 @@ ORACLE_SIGMAS = (4, 8, 16)
 
 def coarse_oracle(image: np.ndarray, truth: np.ndarray, texels: np.ndarray, sigma: float) -> np.ndarray:
     """``image`` [S, S, 3] with its errors coarser than a Gaussian of ``sigma`` texels taken out by the ``truth``:
-    image x blur(truth) / blur(image), each blur a normalised convolution over ``texels`` [S, S]."""
-    def blur(values: np.ndarray) -> np.ndarray:
-        weight = ndimage.gaussian_filter(texels.astype(np.float64), sigma)[..., None]
-        spread = np.stack([ndimage.gaussian_filter(values[..., c] * texels, sigma) for c in range(3)], -1)
-        return spread / np.maximum(weight, 1e-6)
-
-    return image * blur(truth) / np.maximum(blur(image), 1e-6)
+    image x blur(truth) / blur(image), each blur taken within ``texels`` [S, S] (uv_measure.local_mean)."""
+    return image * local_mean(truth, texels, sigma) / np.maximum(local_mean(image, texels, sigma), 1e-6)
 
 
 def main() -> None:

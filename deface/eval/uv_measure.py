@@ -48,17 +48,20 @@ def uv_consistency(diffuse_a: np.ndarray, diffuse_b: np.ndarray, region: np.ndar
     return score_images(diffuse_a, diffuse_b, region.astype(np.float32))["face"]
 
 
-def relative_detail(image: np.ndarray, region: np.ndarray, sigma: float = SPECKLE_SIGMA) -> np.ndarray:
-    """[Ht, Wt, C]: (X - G X) / G X, G a Gaussian of ``sigma`` texels taken within ``region`` (normalised
-    convolution), so the region's edge is not detail."""
+def local_mean(image: np.ndarray, region: np.ndarray, sigma: float) -> np.ndarray:
+    """[Ht, Wt, C]: G X, a Gaussian of ``sigma`` texels taken within ``region`` (normalised convolution: texels
+    outside it do not count)."""
     weight = region.astype(np.float64)
-    blurred_weight = ndimage.gaussian_filter(weight, sigma)
-    detail = np.zeros(image.shape)
-    for channel in range(image.shape[-1]):
-        values = image[..., channel].astype(np.float64) * weight
-        local = ndimage.gaussian_filter(values, sigma) / np.maximum(blurred_weight, 1e-6)
-        detail[..., channel] = (image[..., channel] - local) / np.maximum(local, 1e-3)
-    return detail
+    blurred_weight = np.maximum(ndimage.gaussian_filter(weight, sigma), 1e-6)
+    return np.stack([ndimage.gaussian_filter(image[..., channel].astype(np.float64) * weight, sigma) / blurred_weight
+                     for channel in range(image.shape[-1])], -1)
+
+
+def relative_detail(image: np.ndarray, region: np.ndarray, sigma: float = SPECKLE_SIGMA) -> np.ndarray:
+    """[Ht, Wt, C]: (X - G X) / G X, G a Gaussian of ``sigma`` texels taken within ``region`` (:func:`local_mean`),
+    so the region's edge is not detail."""
+    local = local_mean(image, region, sigma)
+    return (image - local) / np.maximum(local, 1e-3)
 
 
 def relative_detail_energy(image: np.ndarray, region: np.ndarray, sigma: float = SPECKLE_SIGMA) -> float:

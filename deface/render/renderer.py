@@ -28,7 +28,7 @@ from deface.render import kernels
 from deface.render.camera import Camera
 from deface.render.mesh import Mesh, Textures, sample_textures
 from deface.render.raycast import RayScene
-from deface.render.sh import cosine_lobe_coefficients, non_negative, sh_band_sums
+from deface.render.sh import bands_of, cosine_lobe_coefficients, non_negative, sh_band_sums
 from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 
 
@@ -398,9 +398,7 @@ def _pixel_rays(camera: Camera, flat: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def _bands_of(sh_lights: torch.Tensor) -> int:
-    if sh_lights.ndim != 3 or sh_lights.shape[2] != 3:
+    """B of lights [K, B², 3] (:func:`deface.render.sh.bands_of`, which also checks the shape)."""
+    if sh_lights.ndim != 3:
         raise ValueError(f"sh_lights must be [K, B², 3], got {tuple(sh_lights.shape)}")
-    bands = math.isqrt(sh_lights.shape[1])
-    if bands * bands != sh_lights.shape[1] or bands < 1:
-        raise ValueError(f"sh_lights: {sh_lights.shape[1]} coefficients is not a square number of bands")
-    return bands
+    return bands_of(sh_lights)

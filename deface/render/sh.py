@@ -117,8 +117,13 @@ def _radiance_basis(bands: int) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def bands_of(lights: torch.Tensor) -> int:
-    """B of lights [..., B², 3]."""
-    return int(round(math.sqrt(lights.shape[-2])))
+    """B of lights [..., B², 3]; ValueError when that is not their shape."""
+    if lights.ndim < 2 or lights.shape[-1] != 3:
+        raise ValueError(f"SH lights must be [..., B², 3], got {tuple(lights.shape)}")
+    bands = math.isqrt(lights.shape[-2])
+    if bands < 1 or bands * bands != lights.shape[-2]:
+        raise ValueError(f"SH lights: {lights.shape[-2]} coefficients is not a square number of bands")
+    return bands
 
 
 def radiance(lights: torch.Tensor) -> torch.Tensor:
