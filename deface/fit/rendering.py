@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 
 from deface.fit.scene import FrameGeometry
-from deface.fit.state import FrameRender, StageContext
+from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.losses.illuminant import (
     colour_spread,
     front_directions,
@@ -103,6 +103,14 @@ def negative_radiance(context: StageContext) -> torch.Tensor:
     if weight <= 0:
         return torch.zeros(())
     return weight * negative_radiance_loss(context.kept_lights)
+
+
+def with_light_priors(context: StageContext, total: torch.Tensor, terms: LossTerms) -> torch.Tensor:
+    """``total`` plus the terms every stage holds the kept lights to (their colour spread, their negative
+    radiance, the scene light's colour), each kept in ``terms`` by name; added one by one, in this order."""
+    total = total + terms.add("light_colour_spread", light_colour_spread(context))
+    total = total + terms.add("negative_radiance", negative_radiance(context))
+    return total + terms.add("scene_light_colour", scene_light_colour(context))
 
 
 def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:

@@ -141,9 +141,7 @@ def objective(context: StageContext, before_ace: bool, refresh_shadows: bool,
     total = total + terms.add("albedo_prior", weights.albedo_prior * scene.albedo.pow(2).mean())
     total = total + terms.add("identity_prior", weights.identity_prior * scene.identity.pow(2).mean())
     total = total + terms.add("expression_prior", weights.expression_prior * scene.expression.pow(2).mean())
-    total = total + terms.add("light_colour_spread", rendering.light_colour_spread(context))
-    total = total + terms.add("negative_radiance", rendering.negative_radiance(context))
-    return total + terms.add("scene_light_colour", rendering.scene_light_colour(context))
+    return rendering.with_light_priors(context, total, terms)
 
 
 def _decoupling_terms(context: StageContext, frame: int, rendered: FrameRender, before_ace: bool,

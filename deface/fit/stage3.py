@@ -175,9 +175,7 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
         loss = loss + texture_terms(textures, terms)
         if smooth is not None:
             loss = loss + terms.add("smooth_departure", weights.smooth_departure * smooth(textures.diffuse))
-        loss = loss + terms.add("light_colour_spread", rendering.light_colour_spread(context))
-        loss = loss + terms.add("negative_radiance", rendering.negative_radiance(context))
-        return loss + terms.add("scene_light_colour", rendering.scene_light_colour(context))
+        return rendering.with_light_priors(context, loss, terms)
 
     return loss_of
 
