@@ -18,6 +18,11 @@ preset's differences from the default.
 - ``nextface``: the single-illumination baseline: one light, no f, no g, no GP/LP/HP; the photometric
   loss covers the whole render mask.
 - ``nextface-star``: ``nextface`` restricted to the face region h (NextFace* of the paper).
+- ``no-cast-shadows``: ``deface`` for photos without cast shadows (a studio, an even or a single key light; no hat brim,
+  hair, leaves or hand over the face): stage 2's shading evidence at strength 0.4 instead of 1.5, so the lights
+  fit fewer of the pixels with fine texture and a beard, stubble, freckles and moles stay in the maps. The lights
+  then explain less of the face's own shading (dark eye sockets under a key from above, a seam down the nose under
+  a side key), and a cast shadow's edge goes into the map: docs/textures.md "Photos without cast shadows".
 - ``fast``: ``deface`` with fewer iterations, a 192-px working image and 256-px textures, for previews and
   tests.
 - ``deface-mean-skin``: ``deface`` before it kept the tone (the earlier default exactly, with L_pho's clipped
@@ -69,6 +74,8 @@ PRESETS: dict[str, dict] = {
     "code-portrait": _code(num_lights=7, epsilon=0.09, w1=1.0, w2=120, w4=5, scale=1.0, sh_lr=0.003, stage2=1500),
     "nextface": NEXTFACE,
     "nextface-star": {**NEXTFACE, "decouple.restrict_to_face": True},
+    # Photos without cast shadows: stage 2 leaves fine texture (a beard, stubble, freckles) to the maps sooner.
+    "no-cast-shadows": {"shading_evidence.strength": 0.4},
     "fast": {"resolution": 192, "texture_size": 256, "render.shadow_rays": 64, "iterations.stage1": 150,
              "iterations.stage2": 150, "iterations.stage3": 60, "decouple.ace_iteration": 50},
 }
@@ -88,6 +95,9 @@ DESCRIPTIONS = {
     "code-portrait": "The authors' code config for the portrait-shadow set (n = 7, eps = 0.09, 1500 stage-2 steps).",
     "nextface": "Single-light baseline: one light, no f, no g, no priors; L_pho over the whole render mask.",
     "nextface-star": "NextFace*: nextface with L_pho restricted to the face region h.",
+    "no-cast-shadows": "deface for photos without cast shadows (hats, hair, leaves, hands): keeps a beard, stubble "
+                       "and freckles (stage 2's shading evidence at 0.4), leaves more of the face's own shading in "
+                       "the map.",
     "fast": "deface with fewer steps, 192-px working image and 256-px textures: previews and tests.",
 }
 """One line per preset (``deface presets``); the module docstring says what each is for."""

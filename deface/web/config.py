@@ -9,9 +9,9 @@ from pathlib import Path
 from deface.fit import user_options
 from deface.fit.config import FitConfig
 
-PAGE_PRESETS = ("default", "fast", "paper", "nextface")
-"""The presets the page offers (issue 42): the default, a quick preview, the paper's method and the one-light
-baseline; `deface presets` describes them."""
+PAGE_PRESETS = ("default", "no-cast-shadows", "fast", "paper", "nextface")
+"""The presets the page offers (issue 42): the default, the default for photos without cast shadows (keeps more of
+a beard), a quick preview, the paper's method and the one-light baseline; `deface presets` describes them."""
 
 CARD_REFLECTANCES = {"grey card (18 %)": 0.18, "white paper (90 %)": 0.9}
 """The reference surfaces the page names, with their reflectance (tone.illuminant.reference_reflectance)."""
