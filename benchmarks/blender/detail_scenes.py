@@ -10,7 +10,9 @@ Two splits, each in its own folder. Without ``--only``, the first: five scenes (
 ``/work/detail-report``). ``--only blinds,branch,brimside,fingers``: the second, which no setting is tuned on
 (``/work/detail-report2``): a sun through venetian blinds (slanted stripes), a soft sun through large leaves (a
 dapple with wide penumbrae), a hat brim's slanted shadow over the forehead and one eye under a high side key, and a
-spread hand's shadow over the nose, mouth and beard.
+spread hand's shadow over the nose, mouth and beard. ``--only window,clamshell,overcast``: the third, lights that
+cast no shadow over the face (a large window to one side, a key above with a fill below, an overcast sky), for
+settings meant for photos without cast shadows (``/work/detail-report3``).
 
 Writes a truth set that ``deface bench albedo OUT`` reads: ``OUT/albedo/<tone>.png`` (the truth), ``OUT/masks/``
 and ``OUT/mesh.obj`` (copied from detail-synth: the same UV masks and geometry), ``OUT/images/<tone>_<scene>.png``,
@@ -101,6 +103,15 @@ SCENES = {
                      fill=dict(kind="area", angle=(-40, 10), distance=1.2, size=1.0, kelvin=4200, strength=0.08),
                      occluder=("fingers", 0.07, (0.0, -0.035)),
                      world=(1.0, 1.0, 1.0), world_strength=0.12),
+    # the third held-out split (``--only window,clamshell,overcast``): lights without a cast shadow, for the preset
+    # meant for such photos (``no-cast-shadows``)
+    "window":   dict(key=dict(kind="area", angle=(70, 10), distance=1.5, size=1.2, kelvin=6000, strength=1.0),
+                     fill=None, occluder=None, world=(0.9, 0.93, 1.0), world_strength=0.08),
+    "clamshell": dict(key=dict(kind="area", angle=(0, 40), distance=1.0, size=0.6, kelvin=5000, strength=0.9),
+                      fill=dict(kind="area", angle=(0, -30), distance=1.0, size=0.8, kelvin=5000, strength=0.3),
+                      occluder=None, world=(1.0, 1.0, 1.0), world_strength=0.05),
+    "overcast": dict(key=dict(kind="area", angle=(15, 60), distance=2.0, size=3.0, kelvin=6500, strength=0.8),
+                     fill=None, occluder=None, world=(0.8, 0.85, 1.0), world_strength=0.35),
 }
 DEFAULT_SCENES = ("leaves", "hand", "side", "warmcool", "top")
 """The scenes rendered without ``--only``: the first report split (``/work/detail-report``). The others
@@ -536,6 +547,16 @@ leaves with wide penumbrae, a hat brim's slanted shadow over the forehead and on
 over the nose, mouth and beard (a shadow on dark, textured albedo). What it cannot: real hair's geometry, real
 skin's subsurface scattering, or a camera's tone curve."""
         generated = "\nGenerated"
+    if not first and all(SCENES[name]["occluder"] is None for name in present):
+        title = f"# {out.name}: renders of known albedo with dark features, a held-out split without cast shadows"
+        intro = f"""\
+A third held-out split of the detail truth set: the features of `../detail-synth` on the same four skin tones as
+`../detail-report`, under {count} lights that cast no shadow over the face (the face's own shading only), for settings
+meant for photos without cast shadows (`deface fit --preset no-cast-shadows`)."""
+        tell = """\
+What it can tell: whether such settings keep the beard, freckles, moles and birthmark in the albedo and take out the
+face's own shading under lights they were not chosen on. What it cannot: real hair's geometry, real skin's
+subsurface scattering, or a camera's tone curve."""
     beard = ""
     if (out / "albedo" / ".directional").exists():
         only += " --beard directional"
