@@ -533,6 +533,17 @@ albedo on other skin tones and take out shadows of other shapes (dappled foliage
 directions (side, top, a warm key with a cool fill). What it cannot: real hair's geometry, real skin's subsurface
 scattering, or a camera's tone curve."""
         generated = " Generated"
+    elif all(SCENES[name]["occluder"] is None for name in present):
+        title = f"# {out.name}: renders of known albedo with dark features, a held-out split without cast shadows"
+        intro = f"""\
+A third held-out split of the detail truth set: the features of `../detail-synth` on the same four skin tones as
+`../detail-report`, under {count} lights that cast no shadow over the face (the face's own shading only), for settings
+meant for photos without cast shadows (`deface fit --preset no-cast-shadows`)."""
+        tell = """\
+What it can tell: whether such settings keep the beard, freckles, moles and birthmark in the albedo and take out the
+face's own shading under lights they were not chosen on. What it cannot: real hair's geometry, real skin's
+subsurface scattering, or a camera's tone curve."""
+        generated = "\nGenerated"
     else:
         title = f"# {out.name}: renders of known albedo with dark features, a second held-out split"
         intro = f"""\
@@ -547,16 +558,6 @@ leaves with wide penumbrae, a hat brim's slanted shadow over the forehead and on
 over the nose, mouth and beard (a shadow on dark, textured albedo). What it cannot: real hair's geometry, real
 skin's subsurface scattering, or a camera's tone curve."""
         generated = "\nGenerated"
-    if not first and all(SCENES[name]["occluder"] is None for name in present):
-        title = f"# {out.name}: renders of known albedo with dark features, a held-out split without cast shadows"
-        intro = f"""\
-A third held-out split of the detail truth set: the features of `../detail-synth` on the same four skin tones as
-`../detail-report`, under {count} lights that cast no shadow over the face (the face's own shading only), for settings
-meant for photos without cast shadows (`deface fit --preset no-cast-shadows`)."""
-        tell = """\
-What it can tell: whether such settings keep the beard, freckles, moles and birthmark in the albedo and take out the
-face's own shading under lights they were not chosen on. What it cannot: real hair's geometry, real skin's
-subsurface scattering, or a camera's tone curve."""
     beard = ""
     if (out / "albedo" / ".directional").exists():
         only += " --beard directional"
