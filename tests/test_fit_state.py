@@ -266,6 +266,19 @@ def test_report_command_rewrites_the_report_of_a_loaded_fit(written, tmp_path):
     assert f"skin ITA {tone['texture_ita']:.0f}; {darker:.0f} to {lighter:.0f} for the light level" in page
 
 
+def test_report_says_how_to_keep_a_beard_only_where_the_fit_weighed_it_as_shading(written):
+    """The default weighs a beard's texture as shading evidence (it cannot tell a photo without cast shadows), so
+    its page names the preset that keeps more of it; a fit with that preset's strength, or less, is not told."""
+    from types import SimpleNamespace
+
+    from deface.report.html import _detail_hint
+
+    assert "--preset no-cast-shadows" in (written / "report.html").read_text()
+    for name in ("no-cast-shadows", "paper"):
+        assert _detail_hint(SimpleNamespace(config=presets.get(name))) == ""
+    assert "no-cast-shadows" in _detail_hint(SimpleNamespace(config=presets.get("fast")))
+
+
 def test_batch_index_links_each_report(photos, tmp_path, written):
     import shutil
 

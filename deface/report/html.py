@@ -92,6 +92,7 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
 <div class="row">{_figure("textures/diffuse.png", _diffuse_caption(fit), 256)}
 {_figure("textures/specular.png", "specular", 256)}{_figure("textures/roughness.png", "roughness", 256)}
 {_figure(f"{REPORT_DIR}/neutral.png", "albedo under the neutral light")}</div>
+{_detail_hint(fit)}
 <h2>Turntable (studio light)</h2>
 <div class="row">{_figure(f"{REPORT_DIR}/turntable.gif", "the textured mesh turning")}</div>
 <h2>Losses</h2>
@@ -120,6 +121,19 @@ def _diffuse_caption(fit: FitOutput) -> str:
         return f"diffuse (skin ITA {tone['texture_ita']:.0f}{where})"
     return (f"diffuse (skin ITA {tone['texture_ita']:.0f}; {darker:.0f} to {lighter:.0f} for the light level"
             f"{where})")
+
+
+def _detail_hint(fit: FitOutput) -> str:
+    """Where the fit weighed a beard's or freckles' texture as shading evidence more than the no-cast-shadows preset
+    does, how to keep more of it: the fit cannot tell a photo without cast shadows itself (docs/textures.md "Why
+    the choice is the user's"). Empty otherwise."""
+    lighter = presets.get("no-cast-shadows").shading_evidence.strength
+    if fit.config.shading_evidence.strength <= lighter:
+        return ""
+    return ("<p>A beard, stubble or freckles paler here than in the photo? This preset keeps a cast shadow's edge "
+            "out of the map at their cost. If nothing casts a shadow on this face (a hat brim, hair, leaves, a "
+            "hand), fit it with <code>--preset no-cast-shadows</code>, which keeps more of them "
+            "(docs/textures.md, \"Photos without cast shadows\").</p>")
 
 
 def _figure(src: str, caption: str, width: int | None = None) -> str:
