@@ -124,9 +124,10 @@ def _diffuse_caption(fit: FitOutput) -> str:
 
 
 def _detail_hint(fit: FitOutput) -> str:
-    """Where the fit weighed a beard's or freckles' texture as shading evidence more than the no-cast-shadows preset
-    does, how to keep more of it: the fit cannot tell a photo without cast shadows itself (docs/textures.md "Why
-    the choice is the user's"). Empty otherwise."""
+    """How to keep more of a beard or freckles, for a fit whose stage 2 weighed their texture as shading evidence more
+    than the no-cast-shadows preset does (a larger strength: the default, fast); the fit cannot tell a photo without
+    cast shadows itself (docs/textures.md "Why the choice is the user's"). Empty otherwise, and for the presets that
+    reproduce the paper or NextFace (strength 0: no evidence weight)."""
     lighter = presets.get("no-cast-shadows").shading_evidence.strength
     if fit.config.shading_evidence.strength <= lighter:
         return ""
