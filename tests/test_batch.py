@@ -363,6 +363,8 @@ def three_photos(photos, tmp_path_factory) -> Path:
 
 @pytest.mark.slow
 def test_two_workers_give_the_same_results_as_one_process(three_photos, tmp_path):
+    """The fit, and the renders and light coefficients written after it, run on the config's threads (here 1) in
+    this process as in a worker (whose torch has 1 thread, where this process has one per core): the bits agree."""
     runs = {}
     for jobs in ("1", "2"):
         out = tmp_path / f"jobs{jobs}"

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from test_render_gradients import Loss
+from test_render_gradients import SIZE, Loss
 
 from deface.fit.fast_stage3 import TextureTerms
 from deface.losses.texture import PAPER_WEIGHTS
@@ -439,28 +439,49 @@ def test_every_screen_buffer_and_its_gradients_match_reference():
     assert_close(*both_paths(run))
 
 
-def test_kernels_are_deterministic_and_independent_of_the_thread_count():
-    """Gradients gathered per vertex / per block: 1 and 2 threads give bit-identical results."""
+def _loss_values_and_grads():
     loss = Loss()
     inputs = [loss.mesh.vertices, loss.textures.diffuse, loss.sh]
 
-    def run():
-        def render(vertices, diffuse, sh):
-            textures = type(loss.textures)(diffuse, loss.textures.specular, loss.textures.roughness)
-            return loss(vertices=vertices, textures=textures, sh=sh)
+    def render(vertices, diffuse, sh):
+        textures = type(loss.textures)(diffuse, loss.textures.specular, loss.textures.roughness)
+        return loss(vertices=vertices, textures=textures, sh=sh)
 
-        return values_and_grads(render, inputs)
+    return values_and_grads(render, inputs)
 
+
+@pytest.fixture
+def one_torch_thread():
     threads = torch.get_num_threads()
+    torch.set_num_threads(1)
     try:
-        torch.set_num_threads(1)
-        serial, again = run(), run()
-        torch.set_num_threads(2)
-        parallel = run()
+        yield
     finally:
         torch.set_num_threads(threads)
+        kernels.set_threads(None)
+
+
+def test_kernels_are_deterministic_and_independent_of_the_thread_count(one_torch_thread):
+    """The renderer's own kernels (gradients gathered per vertex / per block) on 1 and 2 kernel threads, torch's
+    ops on one: bit-identical, and the same again on a second run."""
+    kernels.set_threads(1)
+    serial, again = _loss_values_and_grads(), _loss_values_and_grads()
+    kernels.set_threads(2)
+    parallel = _loss_values_and_grads()
     for a, b, c in zip(serial, again, parallel, strict=True):
         assert torch.equal(a, b) and torch.equal(a, c)
+
+
+def test_more_torch_threads_change_only_the_summation_order(one_torch_thread):
+    """torch's reductions split over threads add in another order, so a value moves by rounding only: at most
+    n * eps of the largest magnitude for a sum of n float64 terms (n: every pixel, channel and light summed)."""
+    serial = _loss_values_and_grads()
+    torch.set_num_threads(2)
+    parallel = _loss_values_and_grads()
+    summed = SIZE * SIZE * 3 * 2  # pixels x channels x lights of the loss's images
+    for a, b in zip(serial, parallel, strict=True):
+        bound = summed * torch.finfo(torch.float64).eps * float(a.abs().max())
+        assert float((a - b).abs().max()) <= bound
 
 
 def test_renderer_float32_close_to_reference():

@@ -18,7 +18,7 @@ from deface.fit.config import FitConfig
 from deface.fit.framing import decode_side, face_box
 from deface.fit.guard import NonFiniteError
 from deface.fit.log import FitLog
-from deface.fit.pipeline import fit
+from deface.fit.pipeline import fit, torch_threads
 from deface.io.images import LOAD_MAX_PIXELS, LOAD_MAX_SIDE, InputError, image_size, load_image, one_line
 from deface.io.inputs import InputItem
 from deface.io.video import read_spread_frames
@@ -121,6 +121,12 @@ def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
                   log: FitLog) -> tuple[tuple[int, ...], dict]:
     """Fit ``item`` and write its outputs atomically into ``folder`` -> the kept lights' indices and the texture's
     skin tone."""
+    with torch_threads(config.threads):  # writing renders too: the same threads as the fit, in any engine
+        return _fit_and_write(item, folder, config, models, log)
+
+
+def _fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
+                   log: FitLog) -> tuple[tuple[int, ...], dict]:
     frames, indices = load_frames(item, config)
     record = {"path": str(item.path), "kind": item.kind, "frames": indices,
               "size": [int(frames[0].shape[1]), int(frames[0].shape[0])]}

@@ -63,8 +63,8 @@ FrameStride = Annotated[int | None, typer.Option(help="Video: take every k-th fr
                                                       "frame_stride]")]
 FaceIndex = Annotated[int | None, typer.Option(help="Which face when several (0 = largest). [config: "
                                                     "face_index]")]
-Threads = Annotated[int | None, typer.Option(help="Torch threads (default 1: bit-exact results per seed). "
-                                                  "(config: threads)")]
+Threads = Annotated[int | None, typer.Option(help="Torch threads (default 1; a seed and a thread count give "
+                                                  "bit-identical results on one machine). (config: threads)")]
 
 Card = Annotated[str | None, typer.Option(
     "--card", metavar="X0,Y0,X1,Y1",

@@ -448,8 +448,9 @@ class FitConfig:
     seed: int = 0
     """Seed of every random choice of the fit (torch, numpy, shadow rays, K-means)."""
     threads: int = 1
-    """Torch CPU threads for the fit. 1 makes fits bit-exact for a seed (multi-threaded reductions change
-    the summation order); more threads trade that for speed. Batches parallelise better across processes."""
+    """Torch CPU threads for the fit and for writing its files. A seed and a thread count give bit-identical fits on
+    one machine in any engine; another count changes torch's summation order (rounding only).
+    Batches parallelise better across processes."""
     max_frames: int = 8
     """Video: frames used (evenly spread over the clip, after `frame_stride`)."""
     frame_stride: int = 1
