@@ -1,6 +1,8 @@
 """deface: shadow-free 3D face textures by learning to decouple the lights (Huang et al., NeurIPS 2024)."""
 
-__version__ = "0.1.0"
+from deface._version import __version__
+
+__all__ = ["__version__", "load_fit"]
 
 
 def load_fit(path, models_dir=None):

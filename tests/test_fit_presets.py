@@ -50,7 +50,7 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
     assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False,
                        "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3,
                        "iterations.stage2_coarse_share": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
-                       "iterations.stage3_holdout": 0.0, "weights.diffuse_level": 0.0}
+                       "iterations.stage3_holdout": 0.0, "weights.diffuse_level": 0.0, "chroma.enabled": False}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():
@@ -61,9 +61,19 @@ def test_baselines_keep_the_model_mean_skin_and_free_lights():
         assert not tone.free_tone and not tone.scene_light_prior, name
         assert presets.get(name).weights.smooth_departure == 0.0, name
         assert presets.get(name).iterations.stage3_holdout == 0.0, name
+        assert not presets.get(name).chroma.enabled, name
 
 
 def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():
     for name in presets.names():
         config = presets.get(name)
         assert config.render.supersampling == 2 and config.render.render_blur is False, name
+
+
+def test_a_preset_with_a_misspelt_path_or_a_wrong_type_fails_when_written():
+    """Presets are checked when deface/fit/presets.py is imported (``_checked``), naming the preset."""
+    with pytest.raises(ValueError, match="preset 'typo'.*epsilonn"):
+        presets._checked({"typo": {"decouple.epsilonn": 0.1}})
+    with pytest.raises(ValueError, match="preset 'wrong'.*decouple.epsilon"):
+        presets._checked({"wrong": {"decouple.epsilon": "high"}})
+    assert presets._checked({"fine": {"decouple.epsilon": 0.1}}) == {"fine": {"decouple.epsilon": 0.1}}

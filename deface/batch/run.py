@@ -14,7 +14,7 @@ from pathlib import Path
 
 from rich.markup import escape
 
-import deface
+from deface._version import __version__
 from deface.batch.display import BatchDisplay, Tally, Throttle
 from deface.batch.pool import LocalPool
 from deface.batch.record import BatchRecord, append_record, tone_text
@@ -172,7 +172,7 @@ class BatchRun:
         record = BatchRecord(
             path=str(item.path), output=item.name, status=outcome.status, seconds=round(outcome.seconds, 3),
             lights_kept=list(outcome.lights_kept) if outcome.lights_kept is not None else None,
-            error=outcome.error, version=deface.__version__, preset=self.config.preset, attempt=attempt,
+            error=outcome.error, version=__version__, preset=self.config.preset, attempt=attempt,
             engine=self.engine,
             cpu_seconds=round(outcome.cpu_seconds, 3) if outcome.cpu_seconds is not None else None,
             skin_tone=outcome.skin_tone)

@@ -30,6 +30,7 @@ def register(app: typer.Typer) -> None:
     bench.command("skin-tone")(skin_tone_command)
     bench.command("sheet")(sheet_command)
     bench.command("albedo")(albedo_command)
+    bench.command("board")(board_command)
     app.add_typer(bench, name="bench")
 
 
@@ -59,11 +60,19 @@ def make_shadows_command(
         typer.Option(help="Folder of silhouette PNGs; default ../shared/data/shadow-silhouettes."),
     ] = None,
     mediapipe: Annotated[bool, typer.Option(help="Find the face with MediaPipe.")] = True,
+    kinds: Annotated[str | None, typer.Option(
+        help="Comma list of occluder kinds (default: silhouette,hat,leaves,fingers,blinds; also stripes, dapples).")
+    ] = None,
+    fill: Annotated[str, typer.Option(help="R,G,B colour of the light left in the shadow (a cool sky: "
+                                           "0.55,0.75,1).")] = "1,1,1",
+    warm: Annotated[str, typer.Option(help="MIN,MAX warmth of the key light on the whole photo (0: none).")] = "0,0",
+    penumbra: Annotated[str, typer.Option(help="MIN,MAX penumbra sigma, fraction of the face's size (sunlight: "
+                                               "0.002,0.01).")] = "0.004,0.035",
 ) -> None:
     """Write OUTPUT/<photo>-<k>/{source,target,shadow_mask}.png and OUTPUT/manifest.json."""
     from rich.console import Console
 
-    from deface.eval.shadows import SHAPE_KINDS, ShadowConfig, make_shadow_benchmark
+    from deface.eval.shadows import EXTRA_KINDS, SHAPE_KINDS, ShadowConfig, make_shadow_benchmark
 
     photos = list(photos) if photos else _reference_photos()
     missing = [str(p) for p in photos if not Path(p).is_file()]
@@ -73,8 +82,16 @@ def make_shadows_command(
     if silhouettes is not None and not silhouettes.is_dir():
         raise typer.BadParameter(f"--silhouettes {silhouettes} is not a folder")
     files = tuple(str(p) for p in sorted(folder.glob("*.png"))) if folder else ()
-    kinds = SHAPE_KINDS if files else tuple(k for k in SHAPE_KINDS if k != "silhouette")
-    config = ShadowConfig(kinds=kinds, silhouettes=files)
+    chosen = tuple(k.strip() for k in kinds.split(",") if k.strip()) if kinds else SHAPE_KINDS
+    unknown = [k for k in chosen if k not in SHAPE_KINDS + EXTRA_KINDS]
+    if unknown:
+        raise typer.BadParameter(f"--kinds: unknown {', '.join(unknown)}; choose from "
+                                 f"{', '.join(SHAPE_KINDS + EXTRA_KINDS)}")
+    chosen = chosen if files else tuple(k for k in chosen if k != "silhouette")
+    if not chosen:
+        raise typer.BadParameter("--kinds: silhouette needs silhouette files, and none were found")
+    config = ShadowConfig(kinds=chosen, silhouettes=files, fill=_floats(fill, 3, "--fill"),
+                          warm=_floats(warm, 2, "--warm"), penumbra=_floats(penumbra, 2, "--penumbra"))
     manifest = make_shadow_benchmark(
         photos, output, seed=seed, per_photo=per_photo, max_size=max_size, use_mediapipe=mediapipe,
         config=config,
@@ -86,6 +103,16 @@ def make_shadows_command(
             f"face {pair['face_region']}"
         )
     console.print(f"wrote {len(manifest['pairs'])} pairs to {output}")
+
+
+def _floats(text: str, count: int, name: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != count or any(v < 0 for v in values):
+        raise typer.BadParameter(f"{name}: need {count} comma-separated non-negative numbers, got {text!r}")
+    return values
 
 
 def run_command(
@@ -219,6 +246,55 @@ def albedo_command(
     _write_set_results(console, folder, output, "albedo", section, results,
                        contact_sheet(folder, output, renders, list(records)), report,
                        [summary_line(variant, s) for variant, s in summaries.items()])
+
+
+def board_command(
+    output: Annotated[Path, typer.Option("-o", "--output", help="Results folder (pairs and fits, cached per fit).")],
+    preset: Annotated[str, typer.Option(help="The preset judged (default: the shipped default).")] = "default",
+    settings: Annotated[list[str] | None, typer.Option("--set", help="PATH=VALUE change judged (as deface fit "
+                                                       "--set).")] = None,
+    only: Annotated[str | None, typer.Option(help="Comma list of splits (default: all but the held-out one).")] = None,
+    held_out: Annotated[bool, typer.Option("--held-out", help="Also the split no choice has seen.")] = False,
+    jobs: Annotated[int, typer.Option(help="Fits in parallel (one per core).")] = 2,
+    models: Annotated[Path | None, typer.Option("--models", help="Model files folder.")] = None,
+    accept: Annotated[bool, typer.Option(help="Record these figures as the accepted default's "
+                                              "(benchmarks/board/accepted.json).")] = False,
+) -> None:
+    """Judge a configuration on every board split (fresh shadow pairs, truth renders) against the last accepted
+    default: one table, a LOSS where a figure is worse beyond its seed noise; exit 1 if any."""
+    import json
+    import time
+
+    from deface.eval.board import ACCEPTED, compare, read_accepted, run_board, split_names, table_markdown
+    from deface.fit import presets
+    from deface.fit.config import set_from_text
+
+    console = _console()
+    with _usage_errors(console):
+        config = presets.get(preset)
+        for assignment in settings or []:
+            config = set_from_text(config, assignment)
+        names = [n.strip() for n in only.split(",") if n.strip()] if only else split_names(held_out)
+        figures = run_board(config, output, names, jobs, models, log=console.print)
+    rows = compare(figures, read_accepted()["figures"])
+    command = "deface bench board -o OUT" + (f" --preset {preset}" if preset != "default" else "")
+    command += "".join(f" --set {s}" for s in settings or []) + (f" --only {only}" if only else "")
+    command += " --held-out" if held_out else ""
+    table = table_markdown(rows)
+    (output / "board.md").write_text(f"`{command}` ({time.strftime('%Y-%m-%d')})\n\n{table}")
+    (output / "board.json").write_text(json.dumps({"command": command, "figures": figures}, indent=1) + "\n")
+    console.print(table, markup=False, highlight=False)
+    if accept:
+        accepted = read_accepted()
+        accepted["figures"].update(figures)
+        accepted["command"], accepted["date"] = command, time.strftime("%Y-%m-%d")
+        ACCEPTED.write_text(json.dumps(accepted, indent=1) + "\n")
+        console.print(f"recorded as the accepted default's figures in {ACCEPTED}")
+    losses = [r for r in rows if r["loss"]]
+    if losses:
+        console.print(f"{len(losses)} figure(s) lost beyond the noise: " +
+                      ", ".join(f"{r['split']} {r['measure']}" for r in losses))
+        raise typer.Exit(1)
 
 
 def _console():

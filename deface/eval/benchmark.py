@@ -99,11 +99,11 @@ def pair_tasks(pairs: list[Pair], out_dir: Path, variants: list[str], schedule: 
         for pair in pairs:
             folder = Path(out_dir) / name / pair.name
             tasks.append(RecordedTask(f"{name} / {pair.name}", folder / "scores.json", config,
-                                      partial(_pair_scores, pair, config, folder, models_dir)))
+                                      partial(pair_scores, pair, config, folder, models_dir)))
     return tasks
 
 
-def _pair_scores(pair: Pair, config: FitConfig, folder: Path, models_dir) -> dict:
+def pair_scores(pair: Pair, config: FitConfig, folder: Path, models_dir) -> dict:
     """One variant on one pair: the scores.json fields (its images are written into ``folder``)."""
     from deface.eval.protocol import evaluate_pair
 

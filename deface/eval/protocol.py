@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from deface.eval import identity
+from deface.eval.albedo_measures import colour_noise
 from deface.eval.metrics import composite, mean_scores, score_images
 from deface.eval.pairs import Pair
 from deface.eval.report import PairScores, ReportRow
@@ -97,7 +98,8 @@ def uv_scores(source: FitOutput, target: FitOutput, shadow: np.ndarray | None = 
     details = [fit_detail(fit) for fit in (source, target)]
     scores = {"consistency": uv_consistency(*(linear_to_srgb(m) for m in linear), region),
               "texels": int(region.sum()), "speckle": float(np.mean([d["speckle"] for d in details])),
-              "detail": float(np.mean([d["detail"] for d in details]))}
+              "detail": float(np.mean([d["detail"] for d in details])),
+              "colour_noise": float(np.mean([colour_noise(m, region) for m in linear]))}
     if shadow is not None:
         working = _working_frame(shadow, source.framing)
         scores["edge_fringe"] = edge_fringe(*linear, unwrap(working[..., None], source.texels.views[0])[..., 0], region)

@@ -46,6 +46,8 @@ from PIL import Image
 from deface.io.images import linear_to_srgb, load_image, resize_max, srgb_to_linear
 
 SHAPE_KINDS = ("silhouette", "hat", "leaves", "fingers", "blinds")
+EXTRA_KINDS = ("stripes", "dapples")
+"""Kinds drawn only when asked (``--kinds``): thin stripes (a fence, a slatted shade) and sun-dapples."""
 CANVAS = 1024  # side of the canonical occluder plane raster; the face box spans its central half
 
 
@@ -63,6 +65,12 @@ class ShadowConfig:
     """Fraction of the light kept in the umbra."""
     tint: tuple[float, float] = (0.95, 1.0)
     """Per-channel factor of the umbra's remaining (ambient) light."""
+    fill: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """Colour of the umbra's remaining light (multiplies ``tint``): (1, 1, 1) neutral; a cool sky fill under a warm
+    sun is bluer, e.g. (0.55, 0.75, 1.0)."""
+    warm: tuple[float, float] = (0.0, 0.0)
+    """Warmth of the key light cast on the whole photo, both sides of the pair (0 none; 1: blue x0.45, green
+    x0.75 in linear RGB): strong warm sunlight, whose shadows the cool ``fill`` lights."""
     penumbra: tuple[float, float] = (0.004, 0.035)
     """Penumbra Gaussian sigma as a fraction of the face size (min, max over the face)."""
     sss_sigma: tuple[float, float] = (0.015, 0.035)
@@ -230,6 +238,36 @@ def _draw_blinds(rng: np.random.Generator) -> tuple[np.ndarray, dict]:
     return canvas, dict(period=period, duty=duty, angle=angle, phase=phase, cut=cut)
 
 
+def _draw_stripes(rng: np.random.Generator) -> tuple[np.ndarray, dict]:
+    """Thin parallel stripes, near vertical (a fence, a slatted shade): many narrow bands across the face."""
+    canvas = np.zeros((CANVAS, CANVAS), np.uint8)
+    period = rng.uniform(0.08, 0.16)
+    duty = rng.uniform(0.25, 0.45)
+    angle = np.pi / 2 + rng.uniform(-0.3, 0.3)
+    phase = rng.uniform(0, period)
+    c, s = np.cos(angle), np.sin(angle)
+    for k in range(-60, 61):
+        v0 = k * period + phase
+        band = np.array([[-3, v0], [3, v0], [3, v0 + duty * period], [-3, v0 + duty * period]])
+        _poly(canvas, band @ np.array([[c, s], [-s, c]]))
+    return canvas, dict(period=period, duty=duty, angle=angle, phase=phase)
+
+
+def _draw_dapples(rng: np.random.Generator) -> tuple[np.ndarray, dict]:
+    """Sun through foliage: shade with many small round and oval gaps of light."""
+    canvas = np.full((CANVAS, CANVAS), 255, np.uint8)
+    count = int(rng.integers(25, 60))
+    gaps = []
+    for _ in range(count):
+        centre = rng.uniform(-0.9, 0.9, 2)
+        radius = rng.uniform(0.03, 0.12)
+        axes = (radius, radius * rng.uniform(0.5, 1.0))
+        points = _ellipse_points(centre, axes, rng.uniform(0, np.pi))
+        cv2.fillPoly(canvas, [np.round(_px(points)).astype(np.int32)], 0)
+        gaps.append([float(centre[0]), float(centre[1]), float(radius)])
+    return canvas, dict(gaps=gaps)
+
+
 def _draw_silhouette(rng: np.random.Generator, paths: tuple[str, ...]) -> tuple[np.ndarray, dict]:
     """A silhouette file placed with a random scale, rotation and offset."""
     path = paths[int(rng.integers(len(paths)))]
@@ -257,11 +295,15 @@ def draw_occluder(
         return _draw_fingers(rng)
     if kind == "blinds":
         return _draw_blinds(rng)
+    if kind == "stripes":
+        return _draw_stripes(rng)
+    if kind == "dapples":
+        return _draw_dapples(rng)
     if kind == "silhouette":
         if not silhouettes:
             raise ValueError("occluder kind 'silhouette' needs silhouette files (ShadowConfig.silhouettes)")
         return _draw_silhouette(rng, silhouettes)
-    raise ValueError(f"unknown occluder kind {kind!r}; choose from {', '.join(SHAPE_KINDS)}")
+    raise ValueError(f"unknown occluder kind {kind!r}; choose from {', '.join(SHAPE_KINDS + EXTRA_KINDS)}")
 
 
 # --------------------------------------------------------------------------------------- projection
@@ -322,6 +364,16 @@ def shade(target_srgb: np.ndarray, matte_rgb: np.ndarray, keep: float, tint: np.
     linear = srgb_to_linear(target_srgb)
     attenuation = 1.0 - matte_rgb * (1.0 - keep * np.asarray(tint, np.float32))  # [H, W, 3]
     return linear_to_srgb(linear * attenuation)
+
+
+WARM_GAIN = np.array([0.0, 0.25, 0.55], np.float32)  # per unit of warmth, the linear gain lost per channel
+
+
+def warm_light(image_srgb: np.ndarray, warmth: float) -> np.ndarray:
+    """The photo under a warmer key light: linear RGB times (1, 1 - 0.25 w, 1 - 0.55 w); sRGB in and out."""
+    if warmth == 0:
+        return image_srgb
+    return linear_to_srgb(srgb_to_linear(image_srgb) * (1.0 - warmth * WARM_GAIN))
 
 
 def receiver_weight(region: np.ndarray, size: float, falloff: tuple[float, float]) -> np.ndarray:
@@ -387,7 +439,9 @@ def synthesize_shadow(
     matte_rgb = np.clip(matte_rgb, 0.0, 1.0).astype(np.float32)
 
     keep = rng.uniform(*config.keep)
-    tint = rng.uniform(*config.tint, 3)
+    tint = rng.uniform(*config.tint, 3) * np.asarray(config.fill)
+    warmth = rng.uniform(*config.warm)
+    target = warm_light(target, warmth)
     source = shade(target, matte_rgb, keep, tint)
     params.update(
         penumbra_sigma_px=[float(p) for p in pen],
@@ -396,6 +450,7 @@ def synthesize_shadow(
         sss_sigma_px=[float(s) for s in sss],
         keep=keep,
         tint=tint.tolist(),
+        warmth=warmth,
         face_size_px=size,
     )
     return ShadowSample(source=source, target=target, matte=matte_rgb.mean(axis=-1), params=params)

@@ -75,9 +75,13 @@ def photo_config(photo: TonePhoto, preset: str, schedule: dict) -> FitConfig:
     """A variant's configuration for one photo: the photo's own settings (its card) are the method's; NextFace has
     no white level."""
     config = variant_config(preset, schedule)
-    if preset != BASELINE:
-        for assignment in photo.settings:
-            config = set_from_text(config, assignment)
+    return config if preset == BASELINE else with_photo_settings(photo, config)
+
+
+def with_photo_settings(photo: TonePhoto, config: FitConfig) -> FitConfig:
+    """``config`` with the photo's own settings (its card) applied."""
+    for assignment in photo.settings:
+        config = set_from_text(config, assignment)
     return config
 
 

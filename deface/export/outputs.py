@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-import deface
+from deface._version import __version__
 from deface.export.files import staged_directory, write_json
 from deface.export.mesh import TEXTURE_FILES, write_glb, write_obj
 from deface.fit.config import to_dict
@@ -136,7 +136,7 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
         "seconds_per_stage": result.record.seconds,
         "iterations_run": {stage: len(losses) for stage, losses in result.record.losses.items()},
         "notes": result.record.notes,
-        "versions": {"deface": deface.__version__, "torch": torch.__version__, "numpy": np.__version__,
+        "versions": {"deface": __version__, "torch": torch.__version__, "numpy": np.__version__,
                      "python": platform.python_version()},
         "input": record,
     }

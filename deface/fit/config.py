@@ -29,6 +29,7 @@ from deface.priors.face_region import SkinClassifierConfig
 from deface.priors.illuminant import IlluminantConfig
 from deface.priors.shading_evidence import ShadingEvidenceConfig
 from deface.render.renderer import RenderConfig
+from deface.texture.chroma import ChromaConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 
@@ -438,6 +439,8 @@ class FitConfig:
     texel, so no texel is freer than the photos make it."""
     completion: CompletionConfig = field(default_factory=CompletionConfig)
     """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
+    chroma: ChromaConfig = field(default_factory=ChromaConfig)
+    """The diffuse map's chroma held to its luminance after stage 3, before completion (deface/texture/chroma.py)."""
     skin_classifier: SkinClassifierConfig = field(default_factory=SkinClassifierConfig)
     """The offline face-region classifier h (deface/priors/face_region.py), used without BiSeNet's weights."""
     shading_evidence: ShadingEvidenceConfig = field(default_factory=ShadingEvidenceConfig)
@@ -532,6 +535,7 @@ PAPER = {
     "tone.learning_rate": 0.3,
     "texture_pyramid.levels": 1,
     "completion.enabled": False,
+    "chroma.enabled": False,
     "skin_classifier.beard_zone": False,
     "skin_classifier.hull_margin": 0.0,
     "shading_evidence.strength": 0.0,

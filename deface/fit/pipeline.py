@@ -30,7 +30,7 @@ from deface.fit.stage2 import Stage2Result, run_stage2
 from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
 from deface.fit.target import FitTarget, frame_target
-from deface.fit.texels import complete_textures, seen_texels, texture_confidence
+from deface.fit.texels import complete_textures, filtered_chroma, seen_texels, texture_confidence
 from deface.io.images import LOAD_MAX_SIDE, resize_max
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
@@ -197,6 +197,8 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
     renders = [render_frozen(context, frame, stage3.textures)[0] for frame in stage3.frozen]
     seen = seen_texels(stage3.views, [rendered.face_region for rendered in renders])
     textures = stage3.textures
+    if context.config.chroma.enabled:
+        textures = filtered_chroma(textures, seen, context.config.chroma)
     if context.config.completion.enabled:
         textures = complete_textures(context.model, textures, stage3.initial, seen, context.config.completion)
     return FinishedTextures(textures, seen, texture_confidence(stage3.views, renders))

@@ -37,7 +37,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from deface.fit.config import PAPER, FitConfig, override
+from deface.fit.config import PAPER, RENAMED, FitConfig, override
+from deface.fit.config_values import check_value, field_type
 
 # Chosen by the evaluation benchmark (BENCHMARKS.md records the comparison).
 DEFAULT_PRESET = "deface"
@@ -64,8 +65,10 @@ PRESETS: dict[str, dict] = {
     "paper": PAPER,
     "deface": {},
     # `deface` before it kept the tone (the earlier default): the model's mean skin with free lights, L_pho's clipped
-    # channels as values, no half-size stage-2 steps, no held-out pixels, one diffuse step and absolute diffuse terms.
-    "deface-mean-skin": {"tone.free_tone": False, "tone.scene_light_prior": False, "tone.learning_rate": 0.3,
+    # channels as values, no half-size stage-2 steps, no held-out pixels, one diffuse step and absolute diffuse terms,
+    # no chroma filter.
+    "deface-mean-skin": {"chroma.enabled": False, "tone.free_tone": False, "tone.scene_light_prior": False,
+                         "tone.learning_rate": 0.3,
                          "decouple.clipped_as_bound": False, "iterations.stage2_coarse_share": 0.0,
                          "iterations.stage3_holdout": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
                          "weights.diffuse_level": 0.0},
@@ -101,6 +104,22 @@ DESCRIPTIONS = {
     "fast": "deface with fewer steps, 192-px working image and 256-px textures: previews and tests.",
 }
 """One line per preset (``deface presets``); the module docstring says what each is for."""
+
+
+def _checked(presets: dict[str, dict]) -> dict[str, dict]:
+    """Every preset built once when this module is imported: a misspelt path or a value of the wrong type fails
+    here, naming the preset, not when someone picks it."""
+    for name, changes in presets.items():
+        try:
+            for path, value in changes.items():
+                check_value(value, field_type(FitConfig, RENAMED.get(path, path)), path)
+            override(FitConfig(preset=name), **changes)
+        except ValueError as error:
+            raise ValueError(f"preset {name!r}: {error}") from error
+    return presets
+
+
+PRESETS = _checked(PRESETS)
 
 
 def names() -> list[str]:

@@ -15,6 +15,7 @@ import torch
 from deface.io.images import LUMINANCE
 from deface.models.uvmap import rasterize_uv
 from deface.render.mesh import Textures
+from deface.texture.chroma import ChromaConfig, filter_chroma
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
 from deface.texture.confidence import TexelView, combine_frames, texel_view
 
@@ -49,6 +50,12 @@ def seen_texels(views: list[TexelView], face_regions: list[torch.Tensor]) -> np.
     """[Ht, Wt] in [0, 1]: how squarely some frame saw each texel inside its face region h (no resolution term)."""
     looks = [view.seen(region.detach().numpy()) for view, region in zip(views, face_regions, strict=True)]
     return np.max(np.stack(looks), 0)
+
+
+def filtered_chroma(textures: Textures, seen_map: np.ndarray, config: ChromaConfig) -> Textures:
+    """Stage 3's maps with the diffuse map's chroma guided by its luminance (deface/texture/chroma.py)."""
+    diffuse = filter_chroma(textures.diffuse.detach().numpy(), seen_map, config)
+    return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
 
 
 def complete_textures(model, textures: Textures, initial: Textures, seen_map: np.ndarray,

@@ -1,0 +1,73 @@
+"""The diffuse map's chroma follows its luminance: a guided filter of the log-chromaticity, guided by the
+log-luminance.
+
+Why: a skin albedo's chroma changes slowly; where it changes fast (lips, brows, a mole, a birthmark) its luminance
+changes with it. Chroma that changes with no luminance change beside it is what the lights left in the map: the
+different colours of two lights under a mask edge, per-texel colour noise where a map has more texels than the
+photo has pixels. A guided filter (He, Sun and Tang 2013, "Guided Image Filtering") keeps, in every window, the
+part of the chroma that is a linear function of the luminance and replaces the rest by its local mean:
+
+    c'(x) = mean_w(a) G(x) + mean_w(b),   a = cov(G, c) / (var(G) + eps),   b = mean(c) - a mean(G)
+
+with G = log Y (the guide: the map's luminance, left unchanged), c = log(X / Y) for X = R, G, B, windows of
+``radius`` texels, and every mean weighted by how squarely the photos saw each texel, so texels no photo showed
+(completion fills them next) do not bleed in. A mole (darker and browner) keeps its chroma, because it is darker;
+a chroma step at a mask's edge across even skin is averaged away. The luminance, where every fine detail of a beard,
+stubble or freckles lives, is exactly the fitted one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from deface.io.images import LUMINANCE
+
+FLOOR = 1e-4  # linear albedo floor before the logs (a black texel)
+
+
+@dataclass(frozen=True)
+class ChromaConfig:
+    """How the diffuse map's chroma is held to its luminance after stage 3 (``FitConfig.chroma``)."""
+
+    enabled: bool = False
+    """Filter the diffuse map's chroma (docs/textures.md "Chroma"). Off: stage 3's map as it is."""
+    radius: float = 0.008
+    """Window half-side as a fraction of the map's side (4 texels at 512²): the scale of the colour noise removed."""
+    eps: float = 0.002
+    """Regularisation of the guided filter, in (log luminance)²: a window whose luminance varies less than about
+    sqrt(eps) (4 %) is treated as flat, its chroma set to the local mean."""
+
+
+def _box(image: np.ndarray, size: int) -> np.ndarray:
+    return ndimage.uniform_filter(image, size=(size, size) + (1,) * (image.ndim - 2), mode="nearest")
+
+
+def filter_chroma(diffuse: np.ndarray, weight: np.ndarray, config: ChromaConfig) -> np.ndarray:
+    """``diffuse`` [Ht, Wt, 3] linear, ``weight`` [Ht, Wt] >= 0 (how well each texel was seen) -> the map with its
+    chroma guided by its luminance; every texel's luminance unchanged (module doc)."""
+    size = 2 * max(1, round(config.radius * diffuse.shape[0])) + 1
+    rgb = np.maximum(diffuse.astype(np.float64), FLOOR)
+    luminance = rgb @ np.asarray(LUMINANCE, np.float64)
+    guide = np.log(luminance)
+    chroma = np.log(rgb) - guide[..., None]  # [Ht, Wt, 3]
+    w = np.asarray(weight, np.float64) + 1e-6
+    total = _box(w, size)
+
+    def mean(values: np.ndarray) -> np.ndarray:
+        spread = w if values.ndim == 2 else w[..., None]
+        return _box(spread * values, size) / (total if values.ndim == 2 else total[..., None])
+
+    mean_g, mean_c = mean(guide), mean(chroma)
+    var_g = mean(guide * guide) - mean_g ** 2
+    cov = mean(guide[..., None] * chroma) - mean_g[..., None] * mean_c
+    a = cov / (np.maximum(var_g, 0.0) + config.eps)[..., None]
+    b = mean_c - a * mean_g[..., None]
+    filtered = mean(a) * guide[..., None] + mean(b)
+    out = luminance[..., None] * np.exp(filtered)
+    out *= (luminance / np.maximum(out @ np.asarray(LUMINANCE, np.float64), FLOOR))[..., None]
+    keep = diffuse.max(-1) <= FLOOR  # black texels (outside the layout) stay as they were
+    out[keep] = diffuse[keep]
+    return out.astype(diffuse.dtype)
