@@ -404,7 +404,7 @@ def test_clip_whose_middle_frames_have_no_face_keeps_the_others(tmp_path, face_f
     blank = np.full_like(face_frame, 128)
     clip = _clip(tmp_path / "gap.mp4", [face_frame, blank, blank, face_frame])
     config = override(presets.get("fast"), max_frames=4, resolution=64)
-    frames, indices = task.load_frames(InputItem(clip, "video"), config)
+    frames, indices, _ = task.load_frames(InputItem(clip, "video"), config)
     landmarks, kept = detect(frames, config, str(clip), video=True)
     assert indices == [0, 1, 2, 3] and kept == [0, 3] and len(landmarks) == 2
 
@@ -415,7 +415,7 @@ def test_one_frame_clip_is_one_frame(tmp_path, face_frame):
 
     clip = _clip(tmp_path / "single.mp4", [face_frame])
     config = override(presets.get("fast"), resolution=64)
-    frames, indices = task.load_frames(InputItem(clip, "video"), config)
+    frames, indices, _ = task.load_frames(InputItem(clip, "video"), config)
     assert indices == [0] and len(frames) == 1
     assert detect(frames, config, str(clip), video=True)[1] == [0]
 

@@ -117,16 +117,33 @@ def test_a_photo_whose_face_is_small_is_decoded_larger_for_it(photos, tmp_path):
     path = tmp_path / "group.jpg"
     Image.fromarray(canvas).save(path, quality=95)
     config = presets.get("default")
-    frame = load_photo(path, config)
+    frame, found = load_photo(path, config)
     assert max(frame.shape[:2]) > 1.5 * LOAD_MAX_SIDE
+    assert found is None  # found on the smaller decode: the fit finds them again on this frame
     scale = frame.shape[1] / 4000
     landmarks = detect_landmarks(frame)
     crop = choose_framing((frame.shape[1], frame.shape[0]), face_box([landmarks.points], frame.shape[1::-1]),
                           config.resolution, config.crop.margin)
     assert max(crop.size) >= 0.9 * min(config.resolution, 2 * 160 * 0.8)  # the face's crop, not 82 px of it
     assert np.abs(landmarks.points.mean(0) / scale - (2980, 1480)).max() < 20
-    whole = load_photo(path, override(config, **{"crop.enabled": False}))  # no crop: the whole photo at the cap
-    assert max(whole.shape[:2]) == LOAD_MAX_SIDE
+    whole, found = load_photo(path, override(config, **{"crop.enabled": False}))  # no crop: the photo at the cap
+    assert max(whole.shape[:2]) == LOAD_MAX_SIDE and found is None
+
+
+def test_landmarks_found_to_size_a_photo_are_passed_on_when_the_frame_is_kept(photos, tmp_path):
+    """A large photo whose face is large: its landmarks are found once, to size the decode, and passed to the fit
+    with the frame they were found on, equal to what the fit would find on it."""
+    from deface.batch.task import load_photo
+    from deface.io.images import LOAD_MAX_SIDE
+
+    face = np.asarray(Image.open(photos / "facenet-paul_rudd.png").convert("RGB").resize((1600, 1600)))
+    canvas = np.full((3000, 4000, 3), (110, 120, 100), np.uint8)
+    canvas[700:2300, 1200:2800] = face
+    path = tmp_path / "close.jpg"
+    Image.fromarray(canvas).save(path, quality=95)
+    frame, found = load_photo(path, presets.get("default"))
+    assert max(frame.shape[:2]) == LOAD_MAX_SIDE and found is not None
+    np.testing.assert_array_equal(found.points, detect_landmarks(frame).points)
 
 
 def test_the_texture_size_is_the_power_of_two_nearest_what_the_face_supports_within_the_range():

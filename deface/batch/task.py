@@ -94,27 +94,31 @@ def run_job(job: Job, log: FitLog) -> Outcome:
                    skin_tone=tone)
 
 
-def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], list[int]]:
-    """sRGB frames of an input and their indices in the source (a photo is frame 0)."""
+def load_frames(item: InputItem, config: FitConfig) -> tuple[list[np.ndarray], list[int], object]:
+    """sRGB frames of an input, their indices in the source (a photo is frame 0), and a photo's landmarks where
+    they were found on its frame already (else None: the fit finds them)."""
     if item.kind == "image":
-        return [load_photo(item.path, config)], [0]
-    return read_spread_frames(item.path, config.max_frames, config.frame_stride, max_side=LOAD_MAX_SIDE)
+        frame, landmarks = load_photo(item.path, config)
+        return [frame], [0], landmarks
+    frames, indices = read_spread_frames(item.path, config.max_frames, config.frame_stride, max_side=LOAD_MAX_SIDE)
+    return frames, indices, None
 
 
-def load_photo(path: Path, config: FitConfig) -> np.ndarray:
+def load_photo(path: Path, config: FitConfig) -> tuple[np.ndarray, object]:
     """A photo decoded at ``LOAD_MAX_SIDE``, or larger where its face needs more of the file's pixels to reach the
-    fit's working resolution (:func:`deface.fit.framing.decode_side`, within ``LOAD_MAX_PIXELS``)."""
+    fit's working resolution (:func:`deface.fit.framing.decode_side`, within ``LOAD_MAX_PIXELS``); with the
+    landmarks found on the frame returned, when finding the size needed them (else None)."""
     frame = load_image(path, max_side=LOAD_MAX_SIDE)
     file_size, decoded_size = image_size(path), (frame.shape[1], frame.shape[0])
     if max(file_size) <= max(decoded_size) or not config.crop.enabled:
-        return frame
+        return frame, None
     try:
-        points = detect_landmarks(frame, face_index=config.face_index, source=str(path)).points
+        landmarks = detect_landmarks(frame, face_index=config.face_index, source=str(path))
     except (NoFaceError, ValueError):
-        return frame  # the fit says so, with its own message
-    side = decode_side(face_box([points], decoded_size), decoded_size, file_size, config.resolution,
+        return frame, None  # the fit says so, with its own message
+    side = decode_side(face_box([landmarks.points], decoded_size), decoded_size, file_size, config.resolution,
                        config.crop.margin, LOAD_MAX_PIXELS)
-    return load_image(path, max_side=side) if side > 1.05 * max(decoded_size) else frame
+    return (load_image(path, max_side=side), None) if side > 1.05 * max(decoded_size) else (frame, landmarks)
 
 
 def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
@@ -127,7 +131,7 @@ def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
 
 def _fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
                    log: FitLog) -> tuple[tuple[int, ...], dict]:
-    frames, indices = load_frames(item, config)
+    frames, indices, landmarks = load_frames(item, config)
     record = {"path": str(item.path), "kind": item.kind, "frames": indices,
               "size": [int(frames[0].shape[1]), int(frames[0].shape[0])]}
     if item.kind == "image":  # a photo above LOAD_MAX_SIDE was decoded smaller: params.json's camera says both
@@ -135,7 +139,8 @@ def _fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
         if max(record["size"]) > LOAD_MAX_SIDE:
             log.info(f"decoded at {record['size'][0]} x {record['size'][1]} of the file's "
                      f"{record['file_size'][0]} x {record['file_size'][1]}: the face is small in the photo")
-    result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log)
+    result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log,
+                 landmarks=landmarks)
     try:
         write_fit(result, folder, record, page=write_report)
     except OSError as error:

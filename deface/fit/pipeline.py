@@ -60,10 +60,12 @@ class FitState:
         return FitOutput.from_stages(self.context, self.stage3, self.finished, record)
 
 
-def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool):
+def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool, found=None):
     """Landmarks per frame on the whole input frames, and the positions of the frames that have a face (a
-    clip's frames without one are dropped)."""
-    if video:
+    clip's frames without one are dropped); ``found``: a photo's landmarks already detected on ``frames[0]``."""
+    if found is not None and not video:
+        found = [found]
+    elif video:
         found = track_video(frames, face_index=config.face_index, source=source)
     else:
         found = [detect_landmarks(frames[0], face_index=config.face_index, source=source)]
@@ -72,11 +74,11 @@ def detect(frames: list[np.ndarray], config: FitConfig, source: str, video: bool
 
 
 def detect_target(frames: list[np.ndarray], config: FitConfig, source: str, video: bool,
-                  log: FitLog | None = None) -> FitTarget:
-    """The target of input ``frames``: landmarks on the whole frames, then the crop around the face
-    (:func:`deface.fit.target.frame_target`), said in ``log``."""
+                  log: FitLog | None = None, found=None) -> FitTarget:
+    """The target of input ``frames``: landmarks on the whole frames (``found``: a photo's, already detected on
+    it), then the crop around the face (:func:`deface.fit.target.frame_target`), said in ``log``."""
     log = log or FitLog(quiet=True)
-    landmarks, kept = detect(frames, config, source, video)
+    landmarks, kept = detect(frames, config, source, video, found)
     if landmarks[0].num_faces > 1:
         log.info(f"{landmarks[0].num_faces} faces found; fitting face {config.face_index} (0 = largest)")
     if len(kept) < len(frames):
@@ -87,11 +89,12 @@ def detect_target(frames: list[np.ndarray], config: FitConfig, source: str, vide
 
 
 def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source: str = "input",
-        video: bool = False, log: FitLog | None = None) -> FitOutput:
-    """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``."""
+        video: bool = False, log: FitLog | None = None, landmarks=None) -> FitOutput:
+    """Fit frames (sRGB float [H, W, 3] in [0, 1]; one for a photo) with ``config``; ``landmarks``: a photo's,
+    when the caller has already detected them on this very frame (not found twice)."""
     log = log or FitLog(name=source)
     log.start("landmarks")
-    target = detect_target(frames, config, source, video, log)
+    target = detect_target(frames, config, source, video, log, landmarks)
     log.stop("landmarks")
     return fit_target(target, config, models_dir=models_dir, log=log)
 
