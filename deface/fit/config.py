@@ -542,12 +542,12 @@ PAPER = {
     "learning_rates.light_masks": 0.007,
 }
 """The paper's method (Table 6 and the authors' code) where the shipped method, FitConfig's defaults, departs
-from it (each field's docstring says why). These were FitConfig's defaults until issue 41, so a params.json
-written then that leaves a setting out ran with its value here (``config.from_dict``)."""
+from it (each field's docstring says why). Fits made before the shipped method became FitConfig's defaults ran
+with these values, so a params.json that leaves a setting out ran with its value here (``config.from_dict``)."""
 
 
 def _former_defaults() -> FitConfig:
-    """FitConfig's defaults before issue 41: the paper's values, no preset ("custom")."""
+    """FitConfig's former defaults, before the shipped method became them: the paper's values, no preset ("custom")."""
     return override(FitConfig(), **PAPER)
 
 
