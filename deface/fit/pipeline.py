@@ -18,30 +18,27 @@ import numpy as np
 import torch
 
 from deface.fit.coarse import coarse_context
-from deface.fit.config import FitConfig, supports_free_tone
+from deface.fit.config import FitConfig
 from deface.fit.decoupling import Decoupling
-from deface.fit.framing import texture_size_for
+from deface.fit.face_region import face_classifier
 from deface.fit.log import FitLog
 from deface.fit.output import FinishedTextures, FitOutput, RunRecord
 from deface.fit.scene import SceneParameters, initial_lights
 from deface.fit.scene_light import start_from_scene
+from deface.fit.scene_white import scene_illuminant
 from deface.fit.stage1 import fit_landmarks
 from deface.fit.stage2 import Stage2Result, run_stage2
 from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
 from deface.fit.target import FitTarget, frame_target
 from deface.fit.texels import complete_textures, filtered_chroma, seen_texels, texture_confidence
-from deface.io.images import LOAD_MAX_SIDE, resize_max
+from deface.fit.texture_size import choose_texture_size
+from deface.fit.tone_start import initial_tone, log_tone, supported_tone
 from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import detect_landmarks, track_video
-from deface.models.ita import texture_tone
 from deface.models.registry import load_face_model
-from deface.priors.checker import CheckerUnavailable, checker_illuminant, find_checker
-from deface.priors.face_region import load_face_region_classifier
 from deface.priors.human import load_human_prior
-from deface.priors.illuminant import CARD_SOURCES, estimate_illuminant, known_illuminant
 from deface.runtime import keep_freed_memory
-from deface.texture.confidence import triangle_density
 
 
 @dataclass(frozen=True)
@@ -165,31 +162,8 @@ def _run_stages(target: FitTarget, config: FitConfig, models_dir, log: FitLog) -
     log.start("textures")
     finished = finish_textures(context, stage3)
     log.stop("textures")
-    _log_tone(context, finished, log)
+    log_tone(context, finished, log)
     return FitState(context, stage2, stage3, finished, optional)
-
-
-def _log_tone(context: StageContext, finished: FinishedTextures, log: FitLog) -> None:
-    """Say the texture's skin tone and how far the unknown strength of the light leaves it open."""
-    light = context.inputs.scene_light
-    if light is None:
-        return
-    illuminant = light.illuminant
-    tone = texture_tone(finished.textures.diffuse.detach().numpy(), illuminant.level_sigma,
-                        context.target.frames_srgb[0])
-    if tone["texture_ita"] is None:
-        log.info(f"skin tone of the texture: not measured ({tone['note']})")
-        return
-    if illuminant.level_sigma == 0:
-        where = "as given" if illuminant.source == "given" else f"from the {illuminant.source}"
-        log.info(f"skin tone of the texture: ITA {tone['texture_ita']:.1f} (white level {where})")
-        return
-    darker, lighter = tone["ita_interval"]
-    text = (f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
-            f"level's one-sigma spread ({illuminant.source})")
-    if illuminant.source not in CARD_SOURCES:
-        text += "; a grey card in the photo (--card) or the light's white level (--white) narrows it"
-    log.info(text)
 
 
 @torch.no_grad()
@@ -213,7 +187,7 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     starts from, and which optional networks were used. Seed torch/numpy first for a reproducible fit."""
     log = log or FitLog(quiet=True)
     model = load_face_model(config.model, models_dir)
-    config = _supported_tone(model, config, log)
+    config = supported_tone(model, config, log)
     log.start("stage 1")
     corr = correspondence_for(model, models_dir=models_dir)
     result = fit_landmarks(model, corr, target.landmarks, target.size, config.stage1, config.iterations.stage1,
@@ -226,15 +200,15 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
         identity=torch.as_tensor(result.identity), expression=torch.as_tensor(result.expression),
         rotation=torch.as_tensor(result.rotation), translation=torch.as_tensor(result.translation),
         focal=torch.as_tensor(result.focal), albedo=torch.zeros(model.albedo.num_coeffs),
-        lights=initial_lights(config.lights), tone=_initial_tone(model, config),
+        lights=initial_lights(config.lights), tone=initial_tone(model, config),
     )
     decoupling = Decoupling(config.decouple, config.lights.num_lights, target.num_frames, target.size)
     face = PosedFace.create(model, scene, config, target)
-    texture_size = _texture_size(face, target, config, log)
-    classifier, note = _face_classifier(face, target, config, models_dir, log)
+    texture_size = choose_texture_size(face, target, config, log)
+    classifier, note = face_classifier(face, target, config, models_dir, log)
     scene_light = None
     if config.tone.scene_light_prior:
-        illuminant = _scene_illuminant(face, target, config, log)
+        illuminant = scene_illuminant(face, target, config, log)
         where = f" ({illuminant.detail})" if illuminant.detail else ""
         log.info(f"scene illuminant: {illuminant.source}{where}, white level "
                  f"{np.round(illuminant.white, 3).tolist()}, {illuminant.cct:.0f} K")
@@ -250,112 +224,3 @@ def _face_sizes(target: FitTarget) -> torch.Tensor:
     """[T] each frame's detected face size in working pixels: the diagonal of its landmarks' box."""
     boxes = [np.ptp(landmarks.points[:, :2], axis=0) for landmarks in target.landmarks]
     return torch.tensor([float(np.hypot(*box)) for box in boxes], dtype=torch.float32)
-
-
-def _supported_tone(model, config: FitConfig, log: FitLog) -> FitConfig:
-    """``config`` without ``tone.free_tone`` for a model with no tone axis (BFM's AlbedoMM), said in the log."""
-    supported = supports_free_tone(config)
-    if supported is not config:
-        log.info(f"the {model.name} albedo model has no skin-tone axis: the tone is not free (docs/skin-tone.md)")
-    return supported
-
-
-def _initial_tone(model, config: FitConfig) -> float:
-    """The tone a free-tone fit starts from before the scene is read: the model's own mean skin."""
-    return model.albedo.tone.reference_ita if config.tone.free_tone else 0.0
-
-
-@torch.no_grad()
-def _face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, models_dir,
-                     log: FitLog) -> tuple[tuple[torch.Tensor, ...], str]:
-    """h per frame from the stage-1 face, and which parser made it (for the run record)."""
-    classifier, note = _classifier(config.decouple.face_region_source, models_dir, config.skin_classifier)
-    log.info(f"face region h: {note}")
-    found = []
-    for frame in range(target.num_frames):
-        _, fragments = face.fragments(frame)
-        h = classifier(target.frames_srgb[frame], fragments.mask.numpy(), target.landmarks[frame].points)
-        found.append(torch.as_tensor(np.asarray(h), dtype=torch.float32))
-    return tuple(found), note
-
-
-@torch.no_grad()
-def _scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig, log: FitLog):
-    """The white level the user gives (or points a reference card at), else a colour checker's in the photo,
-    else the estimate from every frame's pixels outside the stage-1 face: the whole frames, not only the crop
-    around the face."""
-    scene = target.scene_frames()
-    known = known_illuminant(scene, config.tone.illuminant, target.scale)
-    if known is not None:
-        return known
-    # Statistics of the whole frame: a photo decoded large for a small face (deface/batch/task.py) is read smaller.
-    reading = [resize_max(frame, LOAD_MAX_SIDE)[0] for frame in scene]
-    checker = _checker_illuminant(reading[0], config.tone.illuminant, log)
-    if checker is not None:
-        return checker
-    faces = [_scene_face(face, target, frame, reading[frame].shape[:2]) for frame in range(target.num_frames)]
-    return estimate_illuminant(reading, faces, config.tone.illuminant)
-
-
-def _checker_illuminant(photo: np.ndarray, settings, log: FitLog):
-    """W from a colour checker in ``photo`` (the first frame, whole; ``tone.illuminant.checker``), or None, said
-    in the log; ValueError (one line) when it is required ("on") and unavailable or not found."""
-    if settings.checker == "off":
-        return None
-    try:
-        reading = find_checker(photo)
-    except CheckerUnavailable as error:
-        if settings.checker == "on":
-            raise ValueError(f"tone.illuminant.checker=on: {error}") from None
-        log.info(f"{error}; the light's level is estimated from the scene")
-        return None
-    if reading is None:
-        if settings.checker == "on":
-            raise ValueError("tone.illuminant.checker=on: no colour checker found in the photo (its six grey "
-                             "patches must show, unclipped)")
-        return None
-    return checker_illuminant(reading, settings)
-
-
-def _scene_face(face: PosedFace, target: FitTarget, frame: int, size: tuple[int, int]) -> np.ndarray:
-    """[H, W] bool (``size``): the stage-1 face's coverage of the whole frame resized to ``size``."""
-    geometry = face.geometry(frame)
-    camera = geometry.camera if target.framing.is_whole else target.framing.scene_camera(geometry.camera)
-    if (camera.height, camera.width) != tuple(size):
-        camera = camera.scaled(size[1] / camera.width, width=size[1], height=size[0])
-    return face.renderer.rasterize(geometry.mesh, camera).mask.numpy() > 0
-
-
-@torch.no_grad()
-def _texture_size(face: PosedFace, target: FitTarget, config: FitConfig, log: FitLog) -> int:
-    """``config.texture_size``, or when it is None what the stage-1 face's pixels support
-    (deface/fit/framing.py), said in the log."""
-    if config.texture_size is not None:
-        return config.texture_size
-    supported = max(_texels_per_side(face, frame) for frame in range(target.num_frames))
-    size = texture_size_for(supported, config.texture_size_range)
-    log.info(f"texture size {size}² (the face's pixels support about {supported:.0f}² texels; "
-             f"texture_size_range {config.texture_size_range[0]}-{config.texture_size_range[1]})")
-    return size
-
-
-def _texels_per_side(face: PosedFace, frame: int) -> float:
-    """The UV maps' side at which the stage-1 face's typical pixel sees one texel: the square root of the median,
-    over the pixels the face covers, of its triangle's pixels per unit of UV area."""
-    geometry, fragments = face.fragments(frame)
-    density = triangle_density(geometry.mesh, geometry.camera, (1, 1))  # pixels per unit of UV area
-    covered = fragments.covered_triangles
-    if covered.numel() == 0:
-        return 0.0
-    return float(density[covered].median().sqrt())
-
-
-def _classifier(source: str, models_dir, skin=None):
-    """The face-region classifier h for a config's ``face_region_source`` and a note for the run record."""
-    if source == "none":
-        return (lambda image, coverage, landmarks: coverage), "none (h = render mask)"
-    if source == "bisenet":
-        from deface.priors.bisenet import BiSeNetFaceParser
-
-        return BiSeNetFaceParser.from_models_dir(models_dir), "BiSeNet face parsing (79999_iter.pth)"
-    return load_face_region_classifier(models_dir, prefer="bisenet" if source == "auto" else "skin", skin=skin)
