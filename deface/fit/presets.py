@@ -6,7 +6,8 @@ preset's differences from the default.
 - ``deface``: the defaults. The paper's method with the changes the benchmarks chose (docs/design.md "Default
   preset", docs/textures.md, docs/skin-tone.md, BENCHMARKS.md): M_o = M_R h instead of the distilled field g;
   ACE's eps 0.09 and n = 3 initial lights; Fourier features on f's input; stage-3 maps as pyramids gated by the
-  photos' pixels per texel, completed where unseen, stopped by held-out pixels; the person's skin tone (free
+  photos' pixels per texel, completed where unseen, stopped by held-out pixels, the diffuse map's chroma held to
+  its luminance (deface/texture/chroma.py); the person's skin tone (free
   tone axis, lights held to the scene's illuminant); and what keeps the person's dark albedo in the albedo
   (docs/textures.md "The person's detail"): L_lan in units of the face, stage 2 weighing pixels by their
   shading evidence, an offline h that keeps pigment and the beard zone, and no GP, LP or smooth-departure term.
@@ -88,9 +89,9 @@ PRESETS: dict[str, dict] = {
 DESCRIPTIONS = {
     "paper": "The paper's Table 6: n = 5 lights, f and g, eps = 0.17, 400/200 stage-2/3 steps.",
     "deface": "The default: the paper's method with M_o = M_R h instead of g, eps = 0.09, n = 3, Fourier f; "
-              "gated texture pyramid, completion of unseen texels, the person's detail (stage 2 weighs pixels by "
-              "their shading evidence, no GP or LP) and skin tone (free tone axis, lights held to the scene's "
-              "illuminant).",
+              "gated texture pyramid, the map's chroma held to its luminance, completion of unseen texels, the "
+              "person's detail (stage 2 weighs pixels by their shading evidence, no GP or LP) and skin tone (free "
+              "tone axis, lights held to the scene's illuminant).",
     "deface-mean-skin": "deface with the model's mean skin and free lights (the earlier default; loses the "
                         "person's skin tone): for comparison only.",
     "code-images": "The authors' code config for VoxCeleb2 images (L = 1.5, eps = 0.15).",

@@ -32,8 +32,9 @@ FLOOR = 1e-4  # linear albedo floor before the logs (a black texel)
 class ChromaConfig:
     """How the diffuse map's chroma is held to its luminance after stage 3 (``FitConfig.chroma``)."""
 
-    enabled: bool = False
-    """Filter the diffuse map's chroma (docs/textures.md "Chroma"). Off: stage 3's map as it is."""
+    enabled: bool = True
+    """Filter the diffuse map's chroma (docs/textures.md "Chroma"). Off (the paper's and NextFace's presets, and
+    deface-mean-skin): stage 3's map as it is."""
     radius: float = 0.008
     """Window half-side as a fraction of the map's side (4 texels at 512²): the scale of the colour noise removed."""
     eps: float = 0.002
