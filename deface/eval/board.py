@@ -12,7 +12,8 @@ Splits (:data:`SPLITS`):
   over the truth's, the beard's darkness kept) and of known skin tones (``skin-tone-synth``: ITA error), fitted at
   the configuration as it is.
 One pair split (``held_out``) is left out unless asked for (``--held-out``): it is the split no choice has seen;
-when a choice has used it, replace it by a new one (new seed, new photos) and say so in the log.
+when a choice has used it, replace it by a new one (new seed, new photos) and say so in the log. Seed 34 accepted
+the chroma filter (2026-11-27; its figures are kept in accepted.json's ``used_held_out``); it is now seed 35.
 
 A figure is flagged when it is worse than the accepted one by more than its tolerance (:data:`MEASURES`), about
 the noise between runs, so a flag is a loss beyond the noise.
@@ -81,7 +82,7 @@ SPLITS: tuple[PairSplit | TruthSplit, ...] = (
         "shared:data/images/nextface-s3.png", "shared:data/images/vd092.png"), seed=33),
     PairSplit("held-out", BOARD_PHOTOS + tuple(SKIN + f for f in (
         "dark_fairface_woman_1423.jpg", "light_man_dark_background.jpg", "medium_man_glasses_beard.jpg",
-        "light_woman_pout.png")), seed=34, kinds=("stripes", "dapples", "leaves", "hat", "fingers"),
+        "light_woman_pout.png")), seed=35, kinds=("stripes", "dapples", "leaves", "hat", "fingers"),
         fill=(0.6, 0.8, 1.0), warm=(0.3, 0.8), penumbra=(0.002, 0.02), held_out=True),
     TruthSplit("detail-synth", "data/detail-synth", "albedo"),
     TruthSplit("skin-tone-synth", "data/skin-tone-synth", "tone"),
@@ -102,7 +103,7 @@ MEASURES = {
     "synthesis_ssim": Measure(True, 0.01),
     "synthesis_lpips": Measure(False, 1.0),
     "ita_gap": Measure(False, 1.0, "deg"),
-    "colour_noise": Measure(False, 0.15),
+    "colour_noise": Measure(False, 0.5),
     "psnr": Measure(True, 0.3, "dB"),
     "colour_error": Measure(False, 0.3),
     "noise_over_truth": Measure(False, 0.15),
