@@ -73,6 +73,7 @@ def test_state_is_the_last_done_or_failed_and_skipped_only_counts_alone():
     assert [r.path for r in summary.failed] == ["b"] and summary.fit_seconds == 3.0
 
 
+@pytest.mark.slow
 def test_concurrent_appends_from_processes_keep_whole_lines(tmp_path):
     code = ("import sys; from pathlib import Path; from deface.batch.record import BatchRecord, append_record\n"
             "for i in range(200):\n"
@@ -271,6 +272,7 @@ def _recorded_tasks(folder: Path, config, fail=()):
                          functools.partial(batch_helpers.recorded, i, i in fail)) for i in range(4)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_recorded_tasks_run_once_per_configuration_and_report_in_order(tmp_path, jobs):
     config = override(presets.get("fast"), model="none")  # the workers' warm-up fails at once: only a head start
@@ -293,6 +295,7 @@ def test_recorded_tasks_run_once_per_configuration_and_report_in_order(tmp_path,
     assert not list(tmp_path.rglob("*.partial"))
 
 
+@pytest.mark.slow
 def test_a_failed_recorded_task_fails_the_run_after_the_others(tmp_path):
     config = override(presets.get("fast"), model="none")
     with pytest.raises(TaskFailed, match="(?s)t1 failed: .*ValueError: task 1 fails"):

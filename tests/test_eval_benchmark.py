@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import shutil
 
+import pytest
+
 from deface.eval import identity
 from deface.eval.benchmark import (
     TABLES,
@@ -38,6 +40,7 @@ def test_ablation_rows_have_the_configuration_their_label_says():
         assert f"B = {config.lights.bands}" == label and config.lights.num_lights == 1
 
 
+@pytest.mark.slow
 def test_benchmark_smoke_run_writes_metrics_and_tables(photos, tmp_path):
     pair = tmp_path / "pairs" / "one"
     pair.mkdir(parents=True)

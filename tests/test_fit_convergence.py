@@ -40,6 +40,7 @@ def test_stages_stop_early_and_say_so(shadowed_small):
     assert any("stage 3 converged after 6 of 30 steps" in note for note in log.notes)
 
 
+@pytest.mark.slow
 def test_stage3_keeps_the_step_that_predicts_the_held_out_pixels_best(shadowed_small):
     image, landmarks, scale = shadowed_small
     config = override(presets.get("default"), **{

@@ -115,6 +115,7 @@ def test_fit_command_writes_all_outputs(photos, tmp_path):
     assert "1 of 1 input(s) done, 0 failed" in again.output.splitlines()[-1]  # counted once, not twice
 
 
+@pytest.mark.slow
 def test_bad_inputs_fail_in_one_line_and_the_batch_goes_on(tmp_path, photos):
     broken = tmp_path / "broken.jpg"
     broken.write_bytes(b"not an image")

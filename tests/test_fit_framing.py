@@ -130,6 +130,7 @@ def test_a_photo_whose_face_is_small_is_decoded_larger_for_it(photos, tmp_path):
     assert max(whole.shape[:2]) == LOAD_MAX_SIDE and found is None
 
 
+@pytest.mark.slow
 def test_landmarks_found_to_size_a_photo_are_passed_on_when_the_frame_is_kept(photos, tmp_path):
     """A large photo whose face is large: its landmarks are found once, to size the decode, and passed to the fit
     with the frame they were found on, equal to what the fit would find on it."""
@@ -248,6 +249,7 @@ def cropped_fit(canvas):
                       log=FitLog(quiet=True))
 
 
+@pytest.mark.slow
 def test_the_fit_of_the_crop_has_the_camera_of_a_fit_of_the_whole_canvas(canvas, cropped_fit):
     """In the canvas's pixels, the crop's camera is the one a fit of the whole canvas (at the same scale, 1)
     finds: the same landmarks, the same principal point, so the same pose and focal length. A crop that put
@@ -319,6 +321,7 @@ def _uv_psnr(first: torch.Tensor, second: torch.Tensor, seen: np.ndarray) -> flo
     return 10 * math.log10(1.0 / max(error, 1e-12))
 
 
+@pytest.mark.slow
 def test_a_small_face_in_a_large_canvas_gives_the_maps_of_the_face_cropped_by_hand(canvas, cropped_fit):
     """The canvas through the crop against a hand crop of the face (a tighter square, a little off the auto
     crop): the same pixels of the face, another principal point and another scene around it. Tolerance 33 dB
@@ -389,6 +392,7 @@ def test_a_photo_decoded_smaller_than_its_file_also_gets_the_file_s_camera(cropp
     assert image_size(tmp_path / "rotated.jpg") == (30, 40)
 
 
+@pytest.mark.slow
 def test_the_texture_size_follows_the_face_s_pixels_and_an_explicit_size_wins(canvas):
     """The same face at its own pixels and at half of them: maps of twice the side (a power of two within the
     range), unless texture_size is given."""

@@ -159,6 +159,7 @@ def test_models_check_reports_the_metadata(bfm_files):
     assert "computed cylindrical layout" in result.output
 
 
+@pytest.mark.slow
 def test_stage1_landmark_error_on_photos(bfm, corr, photos):
     from deface.fit import presets
     from deface.fit.pipeline import detect_target
@@ -175,6 +176,7 @@ def test_stage1_landmark_error_on_photos(bfm, corr, photos):
     assert max(errors) <= 0.03, errors
 
 
+@pytest.mark.slow
 def test_fit_writes_every_output_with_working_textures(bfm_files, tmp_path):
     from deface.cli.fit import run
     from deface.eval.benchmark import SCHEDULES

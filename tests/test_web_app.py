@@ -217,6 +217,7 @@ def hosted_module():
     return module
 
 
+@pytest.mark.slow
 def test_app_py_is_the_hosted_demo_on_localhost_unless_on_a_space(monkeypatch, tmp_path, shared):
     import signal
     import socket
