@@ -12,12 +12,15 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from deface.eval.shadows import (
+    CANVAS,
     SHAPE_KINDS,
     ShadowConfig,
     draw_occluder,
     face_region,
     make_shadow_benchmark,
+    shade,
     synthesize_shadow,
+    warm_light,
 )
 from deface.io.images import srgb_to_linear
 
@@ -155,3 +158,21 @@ def test_cli_make_shadows(tmp_path, photos):
     assert (out / "bob-00" / "source.png").is_file()
     result = CliRunner().invoke(app, ["bench", "make-shadows", str(tmp_path / "missing.png"), "-o", str(out)])
     assert result.exit_code != 0 and "not found" in result.output
+
+
+@pytest.mark.parametrize("kind", ["stripes", "dapples"])
+def test_the_extra_occluder_kinds_draw_within_the_plane(kind):
+    canvas, params = draw_occluder(kind, np.random.default_rng(3))
+    assert canvas.shape == (CANVAS, CANVAS) and 0.1 < (canvas > 127).mean() < 0.95 and params
+
+
+def test_a_cool_fill_under_a_warm_key_makes_the_shadow_bluer_than_the_lit_skin():
+    skin = np.full((64, 64, 3), (0.8, 0.6, 0.5), np.float32)
+    warm = warm_light(skin, 0.8)
+    assert warm[0, 0, 2] / warm[0, 0, 0] < skin[0, 0, 2] / skin[0, 0, 0]  # a warm key: less blue than red
+    matte = np.zeros((64, 64, 3), np.float32)
+    matte[:, 32:] = 1.0
+    shaded = shade(warm, matte, keep=0.4, tint=np.array([0.55, 0.75, 1.0]))
+    lit, shadow = shaded[0, 0], shaded[0, 40]
+    assert shadow[2] / shadow[0] > lit[2] / lit[0] and shadow.mean() < lit.mean()
+    np.testing.assert_allclose(shaded[:, :32], warm[:, :32], atol=1e-5)  # unshadowed: the warm photo

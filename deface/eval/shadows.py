@@ -219,6 +219,15 @@ def _draw_fingers(rng: np.random.Generator) -> tuple[np.ndarray, dict]:
     return canvas, dict(count=count, direction=direction, reach=reach, radius=radius, gap=gap)
 
 
+def _bands(canvas: np.ndarray, period: float, duty: float, angle: float, phase: float, count: int) -> None:
+    """Draw 2 count + 1 parallel bands of ``duty`` x ``period`` across the plane, at ``angle``."""
+    c, s = np.cos(angle), np.sin(angle)
+    for k in range(-count, count + 1):
+        v0 = k * period + phase
+        band = np.array([[-3, v0], [3, v0], [3, v0 + duty * period], [-3, v0 + duty * period]])
+        _poly(canvas, band @ np.array([[c, s], [-s, c]]))
+
+
 def _draw_blinds(rng: np.random.Generator) -> tuple[np.ndarray, dict]:
     """Window blinds: parallel bands across the plane."""
     canvas = np.zeros((CANVAS, CANVAS), np.uint8)
@@ -226,11 +235,7 @@ def _draw_blinds(rng: np.random.Generator) -> tuple[np.ndarray, dict]:
     duty = rng.uniform(0.35, 0.6)  # fraction of each period in shadow
     angle = rng.uniform(-0.5, 0.5)
     phase = rng.uniform(0, period)
-    c, s = np.cos(angle), np.sin(angle)
-    for k in range(-12, 13):
-        v0 = k * period + phase
-        band = np.array([[-3, v0], [3, v0], [3, v0 + duty * period], [-3, v0 + duty * period]])
-        _poly(canvas, band @ np.array([[c, s], [-s, c]]))
+    _bands(canvas, period, duty, angle, phase, 12)
     # a frame edge: sometimes only part of the plane is behind the blinds
     cut = rng.uniform(-1.0, 1.0) if rng.random() < 0.5 else None
     if cut is not None:
@@ -245,11 +250,7 @@ def _draw_stripes(rng: np.random.Generator) -> tuple[np.ndarray, dict]:
     duty = rng.uniform(0.25, 0.45)
     angle = np.pi / 2 + rng.uniform(-0.3, 0.3)
     phase = rng.uniform(0, period)
-    c, s = np.cos(angle), np.sin(angle)
-    for k in range(-60, 61):
-        v0 = k * period + phase
-        band = np.array([[-3, v0], [3, v0], [3, v0 + duty * period], [-3, v0 + duty * period]])
-        _poly(canvas, band @ np.array([[c, s], [-s, c]]))
+    _bands(canvas, period, duty, angle, phase, 60)
     return canvas, dict(period=period, duty=duty, angle=angle, phase=phase)
 
 
