@@ -41,12 +41,6 @@ def _reference_photos() -> list[Path]:
     return [shared / "data" / "images" / name for name in REFERENCE_PHOTOS]
 
 
-def _default_silhouettes() -> Path | None:
-    shared = shared_dir()
-    folder = shared / "data" / "shadow-silhouettes" if shared else None
-    return folder if folder is not None and folder.is_dir() else None
-
-
 def make_shadows_command(
     output: Annotated[Path, typer.Option("-o", "--output", help="Benchmark folder to write.")],
     photos: Annotated[
@@ -72,16 +66,23 @@ def make_shadows_command(
     """Write OUTPUT/<photo>-<k>/{source,target,shadow_mask}.png and OUTPUT/manifest.json."""
     from rich.console import Console
 
-    from deface.eval.shadows import EXTRA_KINDS, SHAPE_KINDS, ShadowConfig, make_shadow_benchmark
+    from deface.eval.shadows import (
+        EXTRA_KINDS,
+        SHAPE_KINDS,
+        ShadowConfig,
+        make_shadow_benchmark,
+        shared_silhouettes,
+        silhouette_files,
+    )
 
     photos = list(photos) if photos else _reference_photos()
     missing = [str(p) for p in photos if not Path(p).is_file()]
     if missing:
         raise typer.BadParameter(f"photo(s) not found: {', '.join(missing)}")
-    folder = silhouettes or _default_silhouettes()
+    folder = silhouettes or shared_silhouettes()
     if silhouettes is not None and not silhouettes.is_dir():
         raise typer.BadParameter(f"--silhouettes {silhouettes} is not a folder")
-    files = tuple(str(p) for p in sorted(folder.glob("*.png"))) if folder else ()
+    files = silhouette_files(folder)
     chosen = tuple(k.strip() for k in kinds.split(",") if k.strip()) if kinds else SHAPE_KINDS
     unknown = [k for k in chosen if k not in SHAPE_KINDS + EXTRA_KINDS]
     if unknown:

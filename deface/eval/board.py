@@ -22,7 +22,7 @@ the noise between runs, so a flag is a loss beyond the noise.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
@@ -33,7 +33,7 @@ from deface.eval.albedo_benchmark import FACE, measure_render, read_truth_set
 from deface.eval.albedo_benchmark import summary as albedo_summary
 from deface.eval.benchmark import SCHEDULES, pair_scores
 from deface.eval.pairs import read_pairs
-from deface.eval.shadows import SHAPE_KINDS, ShadowConfig, make_shadow_benchmark
+from deface.eval.shadows import SHAPE_KINDS, ShadowConfig, make_shadow_benchmark, shared_silhouettes, silhouette_files
 from deface.fit.config import FitConfig, override
 from deface.paths import shared_dir
 
@@ -132,18 +132,12 @@ def _photo_path(spec: str) -> Path:
 def make_pairs(split: PairSplit, folder: Path) -> Path:
     """The split's pairs in ``folder`` (made once: the same seed writes the same bytes)."""
     if not (folder / "manifest.json").is_file():
-        config = ShadowConfig(kinds=split.kinds, fill=split.fill, warm=split.warm, penumbra=split.penumbra,
-                              silhouettes=_silhouettes() if "silhouette" in split.kinds else ())
-        if "silhouette" in split.kinds and not config.silhouettes:
-            config = ShadowConfig(**{**asdict(config), "kinds": tuple(k for k in split.kinds if k != "silhouette")})
+        files = silhouette_files(shared_silhouettes()) if "silhouette" in split.kinds else ()
+        kinds = split.kinds if files else tuple(k for k in split.kinds if k != "silhouette")
+        config = ShadowConfig(kinds=kinds, fill=split.fill, warm=split.warm, penumbra=split.penumbra,
+                              silhouettes=files)
         make_shadow_benchmark([_photo_path(p) for p in split.photos], folder, seed=split.seed, config=config)
     return folder
-
-
-def _silhouettes() -> tuple[str, ...]:
-    shared = shared_dir()
-    folder = shared / "data" / "shadow-silhouettes" if shared else None
-    return tuple(str(p) for p in sorted(folder.glob("*.png"))) if folder and folder.is_dir() else ()
 
 
 @dataclass

@@ -44,6 +44,7 @@ import numpy as np
 from PIL import Image
 
 from deface.io.images import linear_to_srgb, load_image, resize_max, srgb_to_linear
+from deface.paths import shared_dir
 
 SHAPE_KINDS = ("silhouette", "hat", "leaves", "fingers", "blinds")
 EXTRA_KINDS = ("stripes", "dapples")
@@ -282,6 +283,18 @@ def _draw_silhouette(rng: np.random.Generator, paths: tuple[str, ...]) -> tuple[
     canvas = cv2.warpAffine(sil, affine, (CANVAS, CANVAS), flags=cv2.INTER_LINEAR)
     params = dict(file=Path(path).name, scale=scale, angle=angle, offset=(offset / CANVAS).tolist())
     return np.clip(canvas, 0, 255).astype(np.uint8), params
+
+
+def shared_silhouettes() -> Path | None:
+    """The shared silhouettes folder (``../shared/data/shadow-silhouettes``), or None where it is absent."""
+    shared = shared_dir()
+    folder = shared / "data" / "shadow-silhouettes" if shared else None
+    return folder if folder is not None and folder.is_dir() else None
+
+
+def silhouette_files(folder: Path | None) -> tuple[str, ...]:
+    """The silhouette PNGs of ``folder`` in name order (none without a folder)."""
+    return tuple(str(p) for p in sorted(folder.glob("*.png"))) if folder else ()
 
 
 def draw_occluder(
