@@ -32,7 +32,6 @@ from pathlib import Path
 from deface.batch.task import Job, Outcome, run_job
 from deface.export.files import OutputBusy, claimed_output, staged_directory
 from deface.fit.log import FitLog
-from deface.io.inputs import InputItem
 
 # Bytes a fit may use: a `--preset fast` batch worker held ~1.0 GB RSS here (ps, the 26 shared photos); the
 # default preset's larger working image and texture need more, hence the margin.
@@ -74,7 +73,7 @@ def run_on_ray(jobs: list[Job], listener, options) -> None:
 
     def submit(index: int, attempt: int) -> None:
         job = jobs[index]
-        shipped = None if shared else ray.put(job.item.path.read_bytes())
+        shipped = None if shared else ray.put([path.read_bytes() for path in job.item.files])
         running[task.remote(job, shipped)] = (index, attempt)
         listener.started(index, index, attempt)
 
@@ -116,14 +115,14 @@ def _runtime_env() -> dict:
     return {"env_vars": {"DEFACE_MODELS": models}} if models else {}
 
 
-def ray_task(job: Job, input_bytes: bytes | None) -> tuple[Outcome, bytes | None]:
+def ray_task(job: Job, input_bytes: list[bytes] | None) -> tuple[Outcome, bytes | None]:
     """One input on a Ray worker: in place (shared filesystem) or in a scratch folder returned as a tar."""
     if job.models is not None and not Path(job.models).is_dir():
         return Outcome("failed", 0.0, error=f"--models {job.models}: not a folder on Ray node {socket.gethostname()}; "
                        "every node needs the model files at that path (or in its ~/.cache/deface/models, without "
                        "--models)"), None
     if input_bytes is None:
-        missing = next((p for p in (job.item.path, job.output) if not Path(p).exists()), None)
+        missing = next((p for p in (*job.item.files, job.output) if not Path(p).exists()), None)
         if missing is not None:
             return Outcome("failed", 0.0, error=f"{missing}: not visible on Ray node {socket.gethostname()}; "
                            "--ray-outputs shared needs the inputs and OUT on a filesystem every node mounts at the "
@@ -131,10 +130,13 @@ def ray_task(job: Job, input_bytes: bytes | None) -> tuple[Outcome, bytes | None
         return run_job(job, FitLog(name=job.item.name, quiet=True)), None
     scratch = Path(tempfile.mkdtemp(prefix="deface-ray-"))
     try:
-        local = scratch / "in" / job.item.path.name
-        local.parent.mkdir()
-        local.write_bytes(input_bytes)
-        item = InputItem(local, job.item.kind)
+        files = []
+        for position, (path, data) in enumerate(zip(job.item.files, input_bytes, strict=True)):
+            local = scratch / "in" / str(position) / path.name  # a person's photos may share a file name
+            local.parent.mkdir(parents=True)
+            local.write_bytes(data)
+            files.append(local)
+        item = job.item.moved(files)
         outcome = run_job(replace(job, item=item, output=scratch / "out", overwrite=True),
                           FitLog(name=job.item.name, quiet=True))
         if outcome.status != "done":

@@ -18,7 +18,8 @@ from deface.fit.config import FitConfig
 from deface.fit.framing import decode_side, face_box
 from deface.fit.guard import NonFiniteError
 from deface.fit.log import FitLog
-from deface.fit.pipeline import fit, torch_threads
+from deface.fit.output import FitOutput
+from deface.fit.pipeline import fit, fit_photos, torch_threads
 from deface.io.images import LOAD_MAX_PIXELS, LOAD_MAX_SIDE, InputError, image_size, load_image, one_line
 from deface.io.inputs import InputItem
 from deface.io.video import read_spread_frames
@@ -129,8 +130,10 @@ def fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
         return _fit_and_write(item, folder, config, models, log)
 
 
-def _fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
-                   log: FitLog) -> tuple[tuple[int, ...], dict]:
+def fit_input(item: InputItem, config: FitConfig, models, log: FitLog) -> tuple[FitOutput, dict]:
+    """Fit ``item`` -> the fit and what params.json's ``input`` says of it."""
+    if item.kind == "person":
+        return fit_person(item, config, models, log)
     frames, indices, landmarks = load_frames(item, config)
     record = {"path": str(item.path), "kind": item.kind, "frames": indices,
               "size": [int(frames[0].shape[1]), int(frames[0].shape[0])]}
@@ -141,6 +144,32 @@ def _fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
                      f"{record['file_size'][0]} x {record['file_size'][1]}: the face is small in the photo")
     result = fit(frames, config, models_dir=models, source=str(item.path), video=item.kind == "video", log=log,
                  landmarks=landmarks)
+    return result, record
+
+
+def fit_person(item: InputItem, config: FitConfig, models, log: FitLog) -> tuple[FitOutput, dict]:
+    """Fit a person's photos as one fit (deface/fit/person.py); photos without a face are left out (said)."""
+    loaded, sources = [], []
+    for path in item.photos:
+        try:
+            loaded.append(load_photo(path, config))
+            sources.append(str(path))
+        except InputError as error:
+            log.info(f"{one_line(error)}; left out of the fit")
+    if not loaded:
+        raise InputError(f"{item.name}: none of its {len(item.photos)} photos could be read")
+    result, crops = fit_photos([photo for photo, _ in loaded], sources, config, models_dir=models, log=log,
+                               landmarks=[found for _, found in loaded])
+    used, side, focal = {crop.source for crop in crops}, result.framing.size[0], float(result.pose.focal)
+    record = {"path": str(item.path), "kind": "person", "name": item.name, "frames": list(range(len(crops))),
+              "photos": [crop.record(focal, side) for crop in crops],
+              "left_out": [str(path) for path in item.photos if str(path) not in used]}
+    return result, record
+
+
+def _fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,
+                   log: FitLog) -> tuple[tuple[int, ...], dict]:
+    result, record = fit_input(item, config, models, log)
     try:
         write_fit(result, folder, record, page=write_report)
     except OSError as error:

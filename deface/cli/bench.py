@@ -209,6 +209,9 @@ def albedo_command(
     jobs: Annotated[int, typer.Option(help="Fits in parallel (one per core).")] = 2,
     models: Annotated[Path | None, typer.Option("--models", help="Model files folder.")] = None,
     report: Annotated[Path | None, typer.Option(help="Also rewrite this set's section of this file.")] = None,
+    sets: Annotated[bool, typer.Option("--sets", help="Also fit each set of renders of one albedo (the manifest's "
+                                       "'set' column; else all of one albedo) as several photos of one person, "
+                                       "scored beside its photos alone: sets.md, sets.json.")] = False,
 ) -> None:
     """Fit renders of known albedo and score each diffuse map against the truth in UV: PSNR, SSIM, colour noise,
     colour error, and per region (the set's masks) the darkness kept and the fine structure; report.md,
@@ -247,6 +250,12 @@ def albedo_command(
     _write_set_results(console, folder, output, "albedo", section, results,
                        contact_sheet(folder, output, renders, list(records)), report,
                        [summary_line(variant, s) for variant, s in summaries.items()])
+    if sets:
+        from deface.eval.person_benchmark import run_person_benchmark, sets_markdown
+
+        set_records = run_person_benchmark(folder, output, variants, records, jobs, models, log=console.print)
+        (output / "sets.md").write_text(sets_markdown(set_records, folder.resolve().name, command + " --sets"))
+        console.print(f"sets: {output / 'sets.md'}")
 
 
 def board_command(

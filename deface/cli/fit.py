@@ -19,7 +19,7 @@ from deface.fit import user_options
 from deface.fit.config import FitConfig
 from deface.fit.log import console
 from deface.io.images import InputError
-from deface.io.inputs import InputItem, list_inputs
+from deface.io.inputs import InputItem, list_inputs, person_input
 from deface.models.registry import require_face_model
 from deface.paths import ModelFileError
 
@@ -56,6 +56,9 @@ def fit_command(
     card_facing: options.CardFacing = None,
     white: options.White = None,
     checker: options.Checker = None,
+    person: Annotated[str | None, typer.Option("--person", help="The inputs are photos of one person: fit them as "
+                                               "one, into OUT/PERSON/ (one shape and one set of maps; pose, "
+                                               "expression, lights and masks per photo).")] = None,
     overwrite: Annotated[bool, typer.Option(help="Redo inputs whose outputs already exist (default: skip them).")]
     = False,
     quiet: Annotated[bool, typer.Option(help="Only errors and a summary.")] = False,
@@ -88,6 +91,8 @@ def fit_command(
             checker=checker,
         )
         items = list_inputs(inputs)
+        if person is not None:
+            items = [person_input(person, items)]
         batch = _batch_options(jobs, engine, ray_address, ray_outputs, overwrite, retry_failed, quiet, verbose)
     except (InputError, ValueError, OSError) as error:
         report_error(error)

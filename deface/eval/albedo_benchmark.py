@@ -122,8 +122,8 @@ def photo_in_uv(result, size: int = measures.SCORE_SIZE) -> np.ndarray:
     return np.where(view.visible[..., None], photo, np.nan)
 
 
-def shown_texels(result, truth_mesh: np.ndarray | None, size: int = measures.SCORE_SIZE) -> np.ndarray:
-    """[S, S] bool: texels of the true surface (or, without it, of the fitted one) that the fit's first frame shows
+def shown_texels(result, truth_mesh: np.ndarray | None, size: int = measures.SCORE_SIZE, frame: int = 0) -> np.ndarray:
+    """[S, S] bool: texels of the true surface (or, without it, of the fitted one) that the fit's ``frame`` shows
     within :data:`MAX_ANGLE`."""
     import torch
 
@@ -131,7 +131,7 @@ def shown_texels(result, truth_mesh: np.ndarray | None, size: int = measures.SCO
     from deface.render.mesh import Mesh
     from deface.texture.confidence import texel_view
 
-    frame = result.frames[0]
+    frame = result.frames[frame]
     fitted = frame.geometry.mesh
     vertices = fitted.vertices
     if truth_mesh is not None:
@@ -141,6 +141,13 @@ def shown_texels(result, truth_mesh: np.ndarray | None, size: int = measures.SCO
     raster = rasterize_uv(result.model.uvs, result.model.triangle_uvs, size)
     view = texel_view(raster, mesh, frame.geometry.camera)
     return view.visible & (view.facing >= np.cos(np.radians(MAX_ANGLE)))
+
+
+def surface_error(result, truth_mesh: np.ndarray, frame: int = 0) -> float:
+    """Median distance (cm) of the fitted ``frame``'s vertices from the true mesh's [V, 3] (the same topology) after
+    the similarity that best aligns them: the shape's error, whatever the pose and scale."""
+    fitted = result.frames[frame].geometry.mesh.vertices.detach().numpy().astype(np.float64)
+    return float(np.median(np.linalg.norm(similarity_aligned(fitted, truth_mesh) - truth_mesh, axis=1)))
 
 
 def similarity_aligned(source: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -182,7 +189,8 @@ def measure_render(folder: Path, render: TruthRender, config: FitConfig, result_
     matched = measures.gain_matched(fitted, truth, reference)
     save_png(result_dir / "albedo_difference.png", measures.difference_image(matched, truth, shown), srgb=False)
     return {"scores": score_fit(fitted, truth, shown, masks, photo_in_uv(result)), "seconds": seconds,
-            "light": render.light, "kept_lights": len(result.lights.kept)}
+            "light": render.light, "kept_lights": len(result.lights.kept),
+            "surface_cm": None if truth_mesh is None else surface_error(result, truth_mesh)}
 
 
 def run_albedo_benchmark(folder: Path, out_dir: Path, variants: dict[str, FitConfig], jobs: int = 2,

@@ -23,6 +23,7 @@ from deface.fit.decoupling import Decoupling
 from deface.fit.face_region import face_classifier
 from deface.fit.log import FitLog
 from deface.fit.output import FinishedTextures, FitOutput, RunRecord
+from deface.fit.person import PhotoCrop, person_target
 from deface.fit.scene import SceneParameters, initial_lights
 from deface.fit.scene_light import start_from_scene
 from deface.fit.scene_white import scene_illuminant
@@ -35,7 +36,7 @@ from deface.fit.texels import complete_textures, filtered_chroma, seen_texels, t
 from deface.fit.texture_size import choose_texture_size
 from deface.fit.tone_start import initial_tone, log_tone, supported_tone
 from deface.landmarks.correspondence import correspondence_for
-from deface.landmarks.detect import detect_landmarks, track_video
+from deface.landmarks.detect import NoFaceError, detect_landmarks, track_video
 from deface.models.registry import load_face_model
 from deface.priors.human import load_human_prior
 from deface.runtime import keep_freed_memory
@@ -94,6 +95,30 @@ def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source:
     target = detect_target(frames, config, source, video, log, landmarks)
     log.stop("landmarks")
     return fit_target(target, config, models_dir=models_dir, log=log)
+
+
+def fit_photos(photos: list[np.ndarray], sources: list[str], config: FitConfig, *, models_dir=None,
+               log: FitLog | None = None, landmarks: list | None = None) -> tuple[FitOutput, list[PhotoCrop]]:
+    """One fit of several photos of one person (sRGB [H, W, 3] of any sizes; deface/fit/person.py): a photo without
+    a face is left out, said in one line; :class:`NoFaceError` when none has one. ``landmarks``: per photo, those
+    already found on it, or None. Returns the fit and where each kept photo's working frame lies in it."""
+    log = log or FitLog(name=sources[0])
+    log.start("landmarks")
+    found = landmarks or [None] * len(photos)
+    kept = []
+    for index, (photo, source) in enumerate(zip(photos, sources, strict=True)):
+        try:
+            points = found[index] or detect_landmarks(photo, face_index=config.face_index, source=source)
+        except NoFaceError as error:
+            log.info(f"{error}; left out of the fit")
+            continue
+        kept.append((photo, points, source))
+    if not kept:
+        raise NoFaceError(f"none of the {len(photos)} photos has a face")
+    target, crops = person_target(*(list(column) for column in zip(*kept, strict=True)), config)
+    log.info(f"{len(kept)} photos, each cut to the square around its face at {target.size[0]} pixels")
+    log.stop("landmarks")
+    return fit_target(target, config, models_dir=models_dir, log=log), crops
 
 
 def _log_framing(target: FitTarget, log: FitLog) -> None:

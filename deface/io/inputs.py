@@ -15,15 +15,37 @@ VIDEO_EXTENSIONS = (".mp4", ".mov", ".avi", ".mkv", ".webm")
 
 @dataclass(frozen=True)
 class InputItem:
-    """One input: a still image or a video clip."""
+    """One input: a still image, a video clip, or several photos of one person (one fit)."""
 
-    path: Path
-    kind: str  # "image" or "video"
+    path: Path  # the image or clip; a person's first photo
+    kind: str  # "image", "video" or "person"
+    photos: tuple[Path, ...] = ()  # a person's photos, ``path`` first
+    label: str | None = None  # a person's name
 
     @property
     def name(self) -> str:
-        """File stem, used to name the outputs."""
-        return self.path.stem
+        """What names the outputs: the file's stem, or the person's name."""
+        return self.label or self.path.stem
+
+    @property
+    def files(self) -> tuple[Path, ...]:
+        """Every file the input reads."""
+        return self.photos or (self.path,)
+
+    def moved(self, files: list[Path]) -> InputItem:
+        """The same input read from ``files`` (copies of :attr:`files`, in order)."""
+        photos = tuple(files) if self.photos else ()
+        return InputItem(Path(files[0]), self.kind, photos, self.label)
+
+
+def person_input(name: str, items: list[InputItem]) -> InputItem:
+    """Several photos of one person, named ``name``, as one input; clips and an unusable name are refused."""
+    if not name or name in (".", "..") or any(c in name for c in "/\\\0"):
+        raise InputError(f"--person {name!r}: a name for the output folder (no slashes) expected")
+    clips = [str(item.path) for item in items if item.kind != "image"]
+    if clips:
+        raise InputError(f"--person takes photos, not clips: {', '.join(clips)}")
+    return InputItem(items[0].path, "person", tuple(item.path for item in items), name)
 
 
 def classify(path: Path) -> str | None:

@@ -1,0 +1,102 @@
+"""Several photos of one person as the frames of one fit (``deface fit --person NAME a.jpg b.jpg c.jpg``).
+
+The fit's frames share one size, one focal length and a principal point at their centre (deface/fit/scene.py), and
+a clip's frames share one crop (deface/fit/framing.py). Photos come from different cameras, sizes and distances, so
+each photo is cut to its own square around its face (``crop.margin`` x its landmarks' box, the photo's edge pixels
+repeated where the square leaves it) and resized to one working side. Each crop is then treated as the frame of a
+camera looking at the face's centre: its principal point is the crop's centre, not the photo's. For a face near a
+wide photo's edge the true camera sees it a few degrees obliquely; the frame's own rotation takes that up, and the
+perspective (the shared focal length) differs by the few percent faces' depths allow. Shared across the photos:
+the identity's shape and every map; per photo: pose, expression, light masks, face region (and the white level the
+scene-light terms read off each crop).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from deface.fit.config import FitConfig
+from deface.fit.target import FitTarget
+from deface.landmarks.detect import Landmarks
+
+
+@dataclass(frozen=True)
+class PhotoCrop:
+    """Where one photo's working frame lies in the photo."""
+
+    source: str  # the photo's file
+    size: tuple[int, int]  # (width, height) of the photo as decoded
+    box: tuple[float, float, float, float]  # the square crop in the photo's pixels: left, top, right, bottom (may
+    # reach past its edges, where the edge pixels are repeated)
+
+    @property
+    def side(self) -> float:
+        return self.box[2] - self.box[0]
+
+    def record(self, focal: float | None = None, side: int | None = None) -> dict:
+        """What params.json says of this photo; with the working frames' ``focal`` and ``side`` (pixels), the
+        frame's camera in the photo's pixels (its principal point the crop's centre: module doc)."""
+        record = {"path": self.source, "size": list(self.size), "box": [round(v, 3) for v in self.box]}
+        if focal is not None and side is not None:
+            record["camera"] = {"focal_px": round(focal * self.side / side, 4),
+                                "principal_point": [round((self.box[0] + self.box[2]) / 2, 3),
+                                                    round((self.box[1] + self.box[3]) / 2, 3)]}
+        return record
+
+
+def square_box(points: np.ndarray, margin: float) -> tuple[float, float, float, float]:
+    """The square of side ``margin`` x the longer side of the box of ``points`` [P, 2], centred on it."""
+    low, high = points.min(0).astype(np.float64), points.max(0).astype(np.float64)
+    centre, side = (low + high) / 2, margin * max(float((high - low).max()), 1.0)
+    return (float(centre[0] - side / 2), float(centre[1] - side / 2),
+            float(centre[0] + side / 2), float(centre[1] + side / 2))
+
+
+def cut_square(photo: np.ndarray, box: tuple[float, float, float, float], side: int) -> np.ndarray:
+    """[side, side, 3] the photo's square ``box`` resized to ``side`` pixels (area-averaged when shrinking), its
+    edge pixels repeated outside the photo."""
+    left, top, right, _ = box
+    factor = side / (right - left)
+    # photo pixel (x, y) -> crop pixel ((x - left) * factor, ...), pixel centres at +0.5 on both sides
+    matrix = np.array([[factor, 0.0, 0.5 * factor - 0.5 - left * factor],
+                       [0.0, factor, 0.5 * factor - 0.5 - top * factor]])
+    if factor < 1.0:  # shrink by area first so the warp does not alias
+        small = cv2.resize(photo, None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA)
+        scale = np.array([small.shape[1] / photo.shape[1], small.shape[0] / photo.shape[0]])
+        matrix = matrix @ np.array([[1 / scale[0], 0, 0.5 / scale[0] - 0.5],
+                                    [0, 1 / scale[1], 0.5 / scale[1] - 0.5], [0, 0, 1]])
+        photo = small
+    warped = cv2.warpAffine(photo.astype(np.float32), matrix, (side, side), flags=cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_REPLICATE)
+    return np.clip(warped, 0.0, 1.0)
+
+
+def crop_landmarks(landmarks: Landmarks, box: tuple[float, float, float, float], side: int) -> Landmarks:
+    """Landmarks found on the photo, in the pixels of its ``box`` resized to ``side``."""
+    factor = side / (box[2] - box[0])
+    points = ((landmarks.points - np.array(box[:2])) * factor).astype(np.float32)
+    return Landmarks(points, (landmarks.depth * factor).astype(np.float32), (side, side), landmarks.num_faces,
+                     landmarks.face_index)
+
+
+def working_side(crops: list[PhotoCrop], config: FitConfig) -> int:
+    """The common side of the working frames: the largest crop's pixels, within the caps of a fit of several
+    frames (``resolution`` and ``clip_resolution``); no photo's face is worth more pixels than its own."""
+    cap = min(config.resolution, config.clip_resolution)
+    return int(max(16, min(cap, round(max(crop.side for crop in crops)))))
+
+
+def person_target(photos: list[np.ndarray], landmarks: list[Landmarks], sources: list[str],
+                  config: FitConfig) -> tuple[FitTarget, list[PhotoCrop]]:
+    """The target of one person's ``photos`` (sRGB [H, W, 3] of any sizes) whose ``landmarks`` were found on them:
+    each cut to the square around its face and resized to one side (module doc); with where each crop lies."""
+    crops = [PhotoCrop(source, (photo.shape[1], photo.shape[0]), square_box(found.points, config.crop.margin))
+             for photo, found, source in zip(photos, landmarks, sources, strict=True)]
+    side = working_side(crops, config)
+    frames = [cut_square(photo, crop.box, side) for photo, crop in zip(photos, crops, strict=True)]
+    working = [crop_landmarks(found, crop.box, side) for found, crop in zip(landmarks, crops, strict=True)]
+    scale = side / float(np.median([crop.side for crop in crops]))
+    return FitTarget(frames, working, scale), crops

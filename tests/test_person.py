@@ -1,0 +1,135 @@
+"""Several photos of one person as one fit (deface/fit/person.py, `deface fit --person`)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from deface.cli.main import app
+from deface.fit.config import FitConfig
+from deface.fit.person import PhotoCrop, crop_landmarks, cut_square, person_target, square_box, working_side
+from deface.io.images import InputError
+from deface.io.inputs import InputItem, person_input
+from deface.landmarks.detect import Landmarks
+
+
+def _dot_photo(width: int, height: int, at: tuple[float, float]) -> np.ndarray:
+    """A grey photo with a small bright Gaussian dot centred at pixel position ``at`` (centres at +0.5)."""
+    y, x = np.mgrid[0:height, 0:width] + 0.5
+    dot = np.exp(-((x - at[0]) ** 2 + (y - at[1]) ** 2) / (2 * 2.0 ** 2))
+    return np.repeat((0.2 + 0.7 * dot)[..., None], 3, axis=2).astype(np.float32)
+
+
+def _peak(image: np.ndarray) -> np.ndarray:
+    """The intensity-weighted centre (pixel positions, centres at +0.5) of the image's bright part."""
+    weight = np.clip(image[..., 0] - 0.3, 0, None)
+    y, x = np.mgrid[0:image.shape[0], 0:image.shape[1]] + 0.5
+    return np.array([(weight * x).sum(), (weight * y).sum()]) / weight.sum()
+
+
+def _landmarks(points: np.ndarray, size: tuple[int, int]) -> Landmarks:
+    return Landmarks(points.astype(np.float32), np.zeros(len(points), np.float32), size, 1, 0)
+
+
+@pytest.mark.parametrize("photo_size, box, side", [((400, 300), (100.0, 50.0, 300.0, 250.0), 100),  # shrink
+                                                    ((120, 90), (30.0, 10.0, 90.0, 70.0), 128),  # enlarge
+                                                    ((200, 200), (-40.0, -20.0, 160.0, 180.0), 64)])  # past edge
+def test_a_point_of_the_photo_lands_where_its_landmark_is_moved(photo_size, box, side):
+    at = (box[0] + 0.55 * (box[2] - box[0]), box[1] + 0.4 * (box[3] - box[1]))
+    at = (max(at[0], 8.0), max(at[1], 8.0))
+    crop = cut_square(_dot_photo(*photo_size, at), box, side)
+    assert crop.shape == (side, side, 3)
+    moved = crop_landmarks(_landmarks(np.array([at]), photo_size), box, side)
+    assert moved.image_size == (side, side)
+    np.testing.assert_allclose(_peak(crop), moved.points[0], atol=0.03 * side)
+
+
+def test_outside_the_photo_its_edge_is_repeated():
+    photo = np.zeros((50, 50, 3), np.float32)
+    photo[:, -1] = 1.0  # the right edge column is white
+    crop = cut_square(photo, (0.0, 0.0, 100.0, 100.0), 100)
+    assert crop[:, 60:].min() > 0.99 and crop[:, :45].max() < 0.01
+
+
+def test_photos_of_different_sizes_become_frames_of_one_size():
+    sizes = [(640, 480), (300, 400), (1000, 1000)]
+    photos = [np.full((h, w, 3), 0.5, np.float32) for w, h in sizes]
+    boxes = [np.array([[200.0, 150.0], [400.0, 350.0]]), np.array([[50.0, 100.0], [150.0, 200.0]]),
+             np.array([[300.0, 300.0], [700.0, 700.0]])]
+    config = FitConfig()
+    target, crops = person_target(photos, [_landmarks(b, s) for b, s in zip(boxes, sizes, strict=True)],
+                                  ["a", "b", "c"], config)
+    side = working_side(crops, config)
+    assert target.num_frames == 3 and target.size == (side, side)
+    assert side == min(config.resolution, config.clip_resolution)  # the largest face's pixels reach the cap
+    for found in target.landmarks:
+        # every face's landmark box lands in the middle of its frame, 1 / margin of its side
+        extent = found.points.max(0) - found.points.min(0)
+        assert extent.max() == pytest.approx(side / config.crop.margin, rel=1e-4)
+        np.testing.assert_allclose((found.points.max(0) + found.points.min(0)) / 2, side / 2, atol=1e-3)
+
+
+def test_square_box_is_centred_and_records_the_photo_camera():
+    box = square_box(np.array([[10.0, 20.0], [30.0, 60.0]]), margin=2.0)
+    assert box == (-20.0, 0.0, 60.0, 80.0)  # a square of 2 x 40 around (20, 40)
+    record = PhotoCrop("a.jpg", (100, 100), box).record(focal=500.0, side=200)
+    assert record["camera"] == {"focal_px": 200.0, "principal_point": [20.0, 40.0]}
+
+
+def test_a_person_input_takes_photos_and_a_plain_name(tmp_path):
+    photos = [InputItem(tmp_path / f"{n}.jpg", "image") for n in "ab"]
+    item = person_input("ada", photos)
+    assert item.name == "ada" and item.files == (tmp_path / "a.jpg", tmp_path / "b.jpg")
+    moved = item.moved([tmp_path / "x" / "a.jpg", tmp_path / "y" / "a.jpg"])
+    assert moved.photos == (tmp_path / "x" / "a.jpg", tmp_path / "y" / "a.jpg") and moved.name == "ada"
+    with pytest.raises(InputError, match="no slashes"):
+        person_input("a/b", photos)
+    with pytest.raises(InputError, match="not clips"):
+        person_input("ada", [*photos, InputItem(tmp_path / "c.mp4", "video")])
+
+
+@pytest.mark.slow
+def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, tmp_path):
+    """Two renders of one albedo and a blank photo: one fit of the two, the blank one said and recorded; the fit
+    reloads and relights."""
+    from PIL import Image
+
+    from deface.eval.benchmark import SCHEDULES
+    from deface.export.load import load_fit
+
+    images = shared / "data" / "detail-synth" / "images"
+    Image.new("RGB", (200, 150), (128, 128, 128)).save(tmp_path / "blank.png")
+    args = ["fit", "--person", "ada", str(images / "ita30_even.png"), str(images / "ita30_key.png"),
+            str(tmp_path / "blank.png"), "-o", str(tmp_path / "out")]
+    args += [f"--set={path}={value}" for path, value in SCHEDULES["smoke"].items()]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    folder = tmp_path / "out" / "ada"
+    params = json.loads((folder / "params.json").read_text())
+    record = params["input"]
+    assert record["kind"] == "person" and [p["path"] for p in record["photos"]] == [
+        str(images / "ita30_even.png"), str(images / "ita30_key.png")]
+    assert record["left_out"] == [str(tmp_path / "blank.png")]
+    for frame in ("000", "001"):
+        assert (folder / "frames" / frame / "render.png").is_file()
+    fit = load_fit(folder)
+    assert len(fit.frames) == 2
+    relit = CliRunner().invoke(app, ["relight", str(folder), "--light", "studio", "-o", str(tmp_path / "relit")])
+    assert relit.exit_code == 0, relit.output
+    assert any((tmp_path / "relit").rglob("*.png"))
+
+
+@pytest.mark.slow
+def test_a_person_with_no_face_in_any_photo_is_one_line(tmp_path):
+    from PIL import Image
+
+    for name in "ab":
+        Image.new("RGB", (120, 90), (90, 90, 90)).save(tmp_path / f"{name}.png")
+    result = CliRunner().invoke(app, ["fit", "--person", "bob", str(tmp_path / "a.png"), str(tmp_path / "b.png"),
+                                      "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert "none of the 2 photos has a face" in result.output
+    assert not (tmp_path / "out" / "bob" / "params.json").exists()
