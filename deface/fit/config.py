@@ -30,7 +30,6 @@ from deface.priors.illuminant import IlluminantConfig
 from deface.priors.shading_evidence import ShadingEvidenceConfig
 from deface.render.renderer import RenderConfig
 from deface.texture.chroma import ChromaConfig
-from deface.texture.consensus import ConsensusConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 
@@ -171,10 +170,6 @@ class Weights:
     """The expression prior in stage 2 (mean(beta) of blendshape weights, mean(beta^2) of PCA ones)."""
     texture_regulariser: float = 0.2
     """Scale of the stage-3 NextFace texture regularisers (deface/losses/texture.py; 0.2 in the authors' code)."""
-    shared_darkening: float = 0.0
-    """Stage 3, several frames: cost of the darkening the light masks give a texel in every frame that sees it
-    (deface/losses/consensus.py): pigment is dark in every photo, a shadow in some. 0 = off; no effect with one
-    photo."""
     smooth_departure: float = 0.0
     """Stage 3: cost of the diffuse map's smooth departure from T^0 beyond one gain per channel
     (deface/losses/texture.py, SmoothDeparture); 0 = off, as in the paper."""
@@ -444,9 +439,6 @@ class FitConfig:
     texel, so no texel is freer than the photos make it."""
     completion: CompletionConfig = field(default_factory=CompletionConfig)
     """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
-    consensus: ConsensusConfig = field(default_factory=ConsensusConfig)
-    """Several photos or frames: the diffuse map's luminance corrected where the frames agree, after stage 3
-    (deface/texture/consensus.py); nothing changes with one photo."""
     chroma: ChromaConfig = field(default_factory=ChromaConfig)
     """The diffuse map's chroma held to its luminance after stage 3, before completion (deface/texture/chroma.py)."""
     skin_classifier: SkinClassifierConfig = field(default_factory=SkinClassifierConfig)
@@ -544,7 +536,6 @@ PAPER = {
     "texture_pyramid.levels": 1,
     "completion.enabled": False,
     "chroma.enabled": False,
-    "consensus.enabled": False,
     "skin_classifier.beard_zone": False,
     "skin_classifier.hull_margin": 0.0,
     "shading_evidence.strength": 0.0,

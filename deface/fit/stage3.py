@@ -21,22 +21,16 @@ from deface.fit.guard import StepGuard
 from deface.fit.holdout import BestStep, HeldOutPixels
 from deface.fit.scene import FrameGeometry
 from deface.fit.state import FrameRender, LossTerms, StageContext
-from deface.fit.texels import LUMINANCE_T, frame_views
+from deface.fit.texels import frame_views
 from deface.losses import decouple as decouple_losses
-from deface.losses.consensus import masks_darkening, shared_darkening
 from deface.losses.texture import PAPER_WEIGHTS, SmoothDeparture
-from deface.models.uvmap import rasterize_uv
 from deface.priors.global_prior import kmeans_palette
 from deface.render.frame import FrameCast, cast_frame, shade_frame
 from deface.render.mesh import Mesh, Textures
 from deface.render.renderer import RenderOutput
-from deface.texture.confidence import TexelView, texel_view, unwrap
+from deface.texture.confidence import TexelView
 from deface.texture.pyramid import TexturePyramid, level_gates, level_sizes
 
-SHARED_DARKENING_SIZE = 128
-"""Side of the UV grid the shared-darkening term compares the frames' masks on (a few pixels per cell)."""
-SHARED_DARKENING_ANGLE = 60.0
-"""Degrees: a frame seeing a texel more obliquely does not vote in the shared-darkening term."""
 MIN_LEVEL = 0.01
 """Floor of the diffuse map's level in :func:`map_level` (a darkest skin's green is about 0.03)."""
 
@@ -174,14 +168,10 @@ def objective(context: StageContext, frozen: list[FrozenFrame], initial: Texture
     diffuse, specular, roughness = context.config.priors.local_prior_weights
     setup = FrameTerms(human_prior, held_out, (diffuse * relative, specular, roughness))
 
-    sharing = darkening_in_uv(context, frozen) if weights.shared_darkening > 0 and len(frozen) > 1 else None
-
     def loss_of(textures: Textures, terms: LossTerms | None = None, errors: list | None = None) -> torch.Tensor:
-        terms, renders = terms or LossTerms(), []
-        loss = sum(_frame_loss(context, f, textures, setup, terms, 1.0 / len(frozen), errors, renders)
+        terms = terms or LossTerms()
+        loss = sum(_frame_loss(context, f, textures, setup, terms, 1.0 / len(frozen), errors)
                    for f in frozen) / len(frozen)
-        if sharing is not None:
-            loss = loss + terms.add("shared_darkening", weights.shared_darkening * sharing(renders))
         loss = loss + texture_terms(textures, terms)
         if smooth is not None:
             loss = loss + terms.add("smooth_departure", weights.smooth_departure * smooth(textures.diffuse))
@@ -263,11 +253,9 @@ def _parameter_groups(context: StageContext, parameters: TextureParameters, init
 
 
 def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, setup: FrameTerms, terms: LossTerms,
-                scale: float, errors: list | None = None, renders: list | None = None) -> torch.Tensor:
+                scale: float, errors: list | None = None) -> torch.Tensor:
     weights, priors, form = context.config.weights, context.config.priors, context.config.decouple.loss_form
     rendered, output = render_frozen(context, frame, textures)
-    if renders is not None:
-        renders.append(rendered)
     loss = terms.add("photometric", weights.photometric * _photometric(context, frame.index, rendered,
                                                                        setup.held_out, errors), scale)
     loss = loss + terms.add("scene_light_level", rendering.scene_light_level(context, frame.index, rendered), scale)
@@ -281,34 +269,6 @@ def _frame_loss(context: StageContext, frame: FrozenFrame, textures: Textures, s
         loss = loss + terms.add("human_prior", weights.human_prior * setup.human_prior(
             rendered.light_images, rendered.coverage), scale)
     return loss
-
-
-def darkening_in_uv(context: StageContext, frozen: list[FrozenFrame], size: int = SHARED_DARKENING_SIZE):
-    """renders -> the shared-darkening term (deface/losses/consensus.py) of the frames' FrameRenders: each frame's
-    masks' darkening read at the texels of a size² map through its frozen camera, where it sees them within
-    SHARED_DARKENING_ANGLE, weighted by how squarely it sees them inside its frozen face region."""
-    raster = rasterize_uv(context.model.uvs, context.model.triangle_uvs, size)
-    grids, weights = [], []
-    for frame in frozen:
-        view = texel_view(raster, frame.geometry.mesh, frame.geometry.camera)
-        height, width = frame.face_region.shape
-        grid = torch.as_tensor(view.pixel, dtype=torch.float32).clone()
-        grid[..., 0], grid[..., 1] = grid[..., 0] / width * 2 - 1, grid[..., 1] / height * 2 - 1
-        region = unwrap(frame.face_region.detach().numpy()[..., None], view)[..., 0]
-        facing = np.where(view.facing >= np.cos(np.radians(SHARED_DARKENING_ANGLE)), view.facing, 0.0)
-        grids.append(grid[None])
-        weights.append(torch.as_tensor(region * facing * view.visible, dtype=torch.float32))
-    weights = torch.stack(weights)
-
-    def term(renders: list[FrameRender]) -> torch.Tensor:
-        darkening = torch.stack([
-            torch.nn.functional.grid_sample(
-                masks_darkening(r.light_images, r.light_masks, LUMINANCE_T)[None, None], grid, mode="bilinear",
-                padding_mode="border", align_corners=False)[0, 0]
-            for r, grid in zip(renders, grids, strict=True)])
-        return shared_darkening(darkening, weights)
-
-    return term
 
 
 def _photometric(context: StageContext, frame: int, rendered: FrameRender, held_out: HeldOutPixels | None,

@@ -14,12 +14,10 @@ import torch
 
 from deface.io.images import LUMINANCE
 from deface.models.uvmap import rasterize_uv
-from deface.render.frame import shade_frame
 from deface.render.mesh import Textures
 from deface.texture.chroma import ChromaConfig, filter_chroma
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
-from deface.texture.confidence import TexelView, combine_frames, texel_view, unwrap
-from deface.texture.consensus import ConsensusConfig, consensus_gain, frame_ratios
+from deface.texture.confidence import TexelView, combine_frames, texel_view
 
 LUMINANCE_T = torch.as_tensor(LUMINANCE, dtype=torch.float32)
 
@@ -71,40 +69,3 @@ def complete_textures(model, textures: Textures, initial: Textures, seen_map: np
                                                    cavity=name == "diffuse"))
     maps["roughness"] = maps["roughness"].clamp_min(0.05)  # stage 3's roughness range
     return Textures(**maps)
-
-
-@torch.no_grad()
-def consensus_textures(context, frozen: list, views: list[TexelView], renders: list, textures: Textures,
-                       config: ConsensusConfig) -> Textures:
-    """Stage 3's maps with the diffuse map's luminance corrected where the frames agree (deface/texture/consensus.py);
-    ``frozen``, ``views``, ``renders``: stage 3's frozen frames, their texel views and FrameRenders."""
-    diffuse = textures.diffuse.detach()
-    estimates, weights = [], []
-    for frame, view, rendered in zip(frozen, views, renders, strict=True):
-        estimate, pixel_weight = unshadowed_albedo(context, frame, rendered, textures)
-        sampled = unwrap(np.stack([estimate, pixel_weight], -1), view)
-        facing = np.where(view.facing >= np.cos(np.radians(config.max_angle)), view.facing, 0.0)
-        weights.append(sampled[..., 1] * facing * np.minimum(view.density, 1.0) * view.visible)
-        estimates.append(sampled[..., 0])
-    fitted = (diffuse @ LUMINANCE_T).numpy().astype(np.float64)
-    weights = np.stack(weights)
-    gain = consensus_gain(frame_ratios(np.stack(estimates), fitted, weights), weights, config)
-    corrected = diffuse * torch.as_tensor(gain, dtype=diffuse.dtype)[..., None]
-    return Textures(corrected.clamp(0.0, 1.0), textures.specular, textures.roughness)
-
-
-def unshadowed_albedo(context, frame, rendered, textures: Textures) -> tuple[np.ndarray, np.ndarray]:
-    """[H, W] the luminance of the albedo the frame's photo implies were no cast shadow on it: over the brightest
-    kept light's diffuse shading at each pixel (the renderer's own self-shadowing kept; its specular reflection
-    taken off first), and [H, W] where that holds (the face region, where the shading is not near 0)."""
-    white = Textures(torch.ones_like(textures.diffuse), torch.zeros_like(textures.specular), textures.roughness)
-    gloss = Textures(torch.zeros_like(textures.diffuse), textures.specular, textures.roughness)
-    lights = context.kept_lights
-    shadings = shade_frame(context.renderer, frame.cast, white, lights).images @ LUMINANCE_T  # [K, H, W]
-    glints = shade_frame(context.renderer, frame.cast, gloss, lights).images @ LUMINANCE_T
-    shading, brightest = shadings.max(0)
-    glint = glints.gather(0, brightest[None])[0]
-    photo = context.target.images[frame.index] @ LUMINANCE_T
-    lit = shading > 0.05 * shading.max().clamp_min(1e-6)
-    estimate = torch.where(lit, (photo - glint).clamp_min(0.0) / shading.clamp_min(1e-6), torch.zeros_like(photo))
-    return estimate.numpy(), (rendered.face_region * lit).numpy()
