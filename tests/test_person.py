@@ -113,8 +113,10 @@ def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, tmp_pa
     assert record["kind"] == "person" and [p["path"] for p in record["photos"]] == [
         str(images / "ita30_even.png"), str(images / "ita30_key.png")]
     assert record["left_out"] == [str(tmp_path / "blank.png")]
-    for frame in ("000", "001"):
-        assert (folder / "frames" / frame / "render.png").is_file()
+    page = (folder / "report.html").read_text()
+    for frame, photo in (("000", "report/input.png"), ("001", "report/input_001.png")):
+        assert (folder / "frames" / frame / "render.png").is_file() and (folder / photo).is_file()
+        assert f"frames/{frame}/render.png" in page and photo in page  # every photo beside its fit
     fit = load_fit(folder)
     assert len(fit.frames) == 2
     relit = CliRunner().invoke(app, ["relight", str(folder), "--light", "studio", "-o", str(tmp_path / "relit")])
@@ -133,3 +135,23 @@ def test_a_person_with_no_face_in_any_photo_is_one_line(tmp_path):
     assert result.exit_code == 1
     assert "none of the 2 photos has a face" in result.output
     assert not (tmp_path / "out" / "bob" / "params.json").exists()
+
+
+def test_people_are_folders_and_person_takes_every_photo(tmp_path):
+    from deface.cli.fit import people_inputs
+    from deface.fit.user_options import UsageError
+
+    for person, names in (("ada", "ab"), ("bob", "c")):
+        (tmp_path / person).mkdir()
+        for name in names:
+            (tmp_path / person / f"{name}.jpg").write_bytes(b"")
+    people = people_inputs([tmp_path / "ada", tmp_path / "bob"], None, True)
+    assert [(item.name, [p.name for p in item.photos]) for item in people] == [("ada", ["a.jpg", "b.jpg"]),
+                                                                                ("bob", ["c.jpg"])]
+    one = people_inputs([tmp_path / "ada", tmp_path / "bob" / "c.jpg"], "eve", False)
+    assert len(one) == 1 and one[0].name == "eve" and len(one[0].photos) == 3
+    assert [item.name for item in people_inputs([tmp_path / "ada"], None, False)] == ["a", "b"]
+    with pytest.raises(InputError, match="folders, one per person"):
+        people_inputs([tmp_path / "bob" / "c.jpg"], None, True)
+    with pytest.raises(UsageError, match="give one"):
+        people_inputs([tmp_path / "ada"], "eve", True)

@@ -59,6 +59,8 @@ def fit_command(
     person: Annotated[str | None, typer.Option("--person", help="The inputs are photos of one person: fit them as "
                                                "one, into OUT/PERSON/ (one shape and one set of maps; pose, "
                                                "expression, lights and masks per photo).")] = None,
+    people: Annotated[bool, typer.Option("--people", help="Each input is a folder of photos of one person, fitted "
+                                         "as one into OUT/<folder name>/ (as --person).")] = False,
     overwrite: Annotated[bool, typer.Option(help="Redo inputs whose outputs already exist (default: skip them).")]
     = False,
     quiet: Annotated[bool, typer.Option(help="Only errors and a summary.")] = False,
@@ -90,9 +92,7 @@ def fit_command(
             threads=threads, card=card, card_reflectance=card_reflectance, card_facing=card_facing, white=white,
             checker=checker,
         )
-        items = list_inputs(inputs)
-        if person is not None:
-            items = [person_input(person, items)]
+        items = people_inputs(inputs, person, people)
         batch = _batch_options(jobs, engine, ray_address, ray_outputs, overwrite, retry_failed, quiet, verbose)
     except (InputError, ValueError, OSError) as error:
         report_error(error)
@@ -105,6 +105,21 @@ def fit_command(
         raise typer.Exit(EXIT_FAILED) from None
     if run(items, output, config, models, batch=batch):
         raise typer.Exit(EXIT_FAILED)
+
+
+def people_inputs(inputs: list[Path], person: str | None, people: bool) -> list[InputItem]:
+    """The inputs as fits: one per file (default), all of them as one person (``--person``), or one person per
+    folder (``--people``)."""
+    if person is not None and people:
+        raise user_options.UsageError("--person and --people: give one (--people names each person by its folder)")
+    if person is not None:
+        return [person_input(person, list_inputs(inputs))]
+    if not people:
+        return list_inputs(inputs)
+    files = [str(path) for path in inputs if not path.is_dir()]
+    if files:
+        raise InputError(f"--people takes folders, one per person: {', '.join(files)}")
+    return [person_input(folder.resolve().name, list_inputs([folder])) for folder in inputs]
 
 
 def _batch_options(jobs, engine, ray_address, ray_outputs, overwrite, retry_failed, quiet, verbose) -> BatchOptions:

@@ -73,7 +73,8 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
         save_png(images / f"sphere_{light}.png", lit_sphere(rendered[slot]))
     neutral = fit.render(lights=white_light(fit.lights.bands))[0]
     save_png(images / "neutral.png", neutral.face.numpy())
-    save_png(images / "input.png", fit.frames[0].photo_srgb, srgb=False)
+    for index, frame in enumerate(fit.frames):
+        save_png(images / ("input.png" if index == 0 else f"input_{index:03d}.png"), frame.photo_srgb, srgb=False)
     write_animation(turntable_frames(fit, preset_lights("studio", fit.lights.bands), 90.0, TURNTABLE_FRAMES),
                     images / "turntable.gif", fps=8)
     curves = _loss_curves(fit, images / "losses.png")
@@ -86,6 +87,7 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
 <div class="row">{_figure(f"{REPORT_DIR}/input.png", "input: the working image (the crop around the face)")}
 {_figure(f"{base}render.png", "I_out: the fit composited into the photo")}
 {_figure(f"{base}render_face.png", "I_R: the rendered face")}</div>
+{_frames_section(fit)}
 <h2>Lights kept ({len(fit.lights.kept)} of {fit.lights.sh.shape[0]}) and the face region</h2>
 <div class="row">{lights}{_figure(f"{base}masks/face.png", "face region M_o")}</div>
 <h2>Textures</h2>
@@ -105,6 +107,19 @@ def write_report(fit: FitOutput, folder: Path, name: str = "") -> Path:
     path = folder / "report.html"
     path.write_text(page)
     return path
+
+
+def _frames_section(fit: FitOutput) -> str:
+    """Every frame (a clip's, or each photo of a person) beside its fit; empty for one photo (above)."""
+    if fit.num_frames == 1:
+        return ""
+    inputs = [f"{REPORT_DIR}/input.png"] + [f"{REPORT_DIR}/input_{i:03d}.png" for i in range(1, fit.num_frames)]
+    rows = "".join(
+        f'<div class="row">{_figure(inputs[i], f"frame {i}: input")}'
+        f'{_figure(f"frames/{i:03d}/render.png", f"frame {i}: the fit composited")}'
+        f'{_figure(f"frames/{i:03d}/render_face.png", f"frame {i}: the rendered face")}</div>'
+        for i in range(fit.num_frames))
+    return f"<h2>Every frame beside its fit ({fit.num_frames} frames, one shape and one set of maps)</h2>\n{rows}"
 
 
 def _diffuse_caption(fit: FitOutput) -> str:
