@@ -155,3 +155,19 @@ def test_people_are_folders_and_person_takes_every_photo(tmp_path):
         people_inputs([tmp_path / "bob" / "c.jpg"], None, True)
     with pytest.raises(UsageError, match="give one"):
         people_inputs([tmp_path / "ada"], "eve", True)
+
+
+def test_the_web_page_fits_a_jobs_photos_as_one_person_and_a_clip_on_its_own(tmp_path):
+    from deface.web.uploads import PERSON, one_person, stage_uploads
+
+    uploads = []
+    for name in ("front.jpg", "side.png", "walk.mp4"):
+        (tmp_path / name).write_bytes(b"x")
+        uploads.append(tmp_path / name)
+    staged = stage_uploads(uploads, tmp_path / "job", 10)
+    pairs = one_person(staged)
+    assert [(shown, item.kind, item.name) for shown, item in pairs] == [
+        ("front.jpg + side.png", "person", PERSON), ("walk.mp4", "video", "walk")]
+    assert [path.name for path in pairs[0][1].photos] == ["front.jpg", "side.png"]
+    alone = one_person(stage_uploads(uploads[:1], tmp_path / "job2", 10))
+    assert [(shown, item.kind) for shown, item in alone] == [("front.jpg", "image")]  # one photo: a plain fit

@@ -27,7 +27,16 @@ from deface.web.jobs import FitService, InputState, WebJob
 from deface.web.progress import duration_text
 from deface.web.relight import LIGHT_PRESETS, Relighter
 from deface.web.results import fit_view
-from deface.web.uploads import UploadError, box_from_corners, box_text, draw_box, parse_box, preview, stage_uploads
+from deface.web.uploads import (
+    UploadError,
+    box_from_corners,
+    box_text,
+    draw_box,
+    one_person,
+    parse_box,
+    preview,
+    stage_uploads,
+)
 
 PRESET_WORDS = {"default": "the full method", "fast": "a quick preview", "paper": "the paper's settings",
                 "nextface": "one light: the baseline"}
@@ -67,6 +76,8 @@ class WebApp:
                 with gr.Column(scale=1):
                     self.files = gr.File(label="Photos or a clip", file_count="multiple", type="filepath",
                                          elem_id="uploads")
+                    self.one_person = gr.Checkbox(label="These photos are one person: one head and one texture from "
+                                                  "all of them", value=False, elem_id="one-person")
                     self.preset = gr.Dropdown(choices, value=self.config.presets[0], label="Preset",
                                               elem_id="preset")
                     with gr.Accordion("Grey card (optional)", open=False):
@@ -125,7 +136,7 @@ class WebApp:
         self.files.change(self.preview_card, self.files, card, queue=False, **quiet)
         self.card.select(self.click_card, [self.files, self.corner], card, **quiet)
         self.clear_card.click(self.preview_card, self.files, card, queue=False, **quiet)
-        self.fit.click(self.submit, [self.files, self.preset, self.box, self.card_kind, self.jobs],
+        self.fit.click(self.submit, [self.files, self.preset, self.box, self.card_kind, self.jobs, self.one_person],
                        [self.jobs, self.status, self.timer], concurrency_limit=None, show_progress="hidden")
         self.timer.tick(self.refresh, [self.jobs, self.known, self.result],
                         [self.status, self.result, self.known, self.timer, self.results, self.download_all],
@@ -161,8 +172,10 @@ class WebApp:
         return {self.card: draw_box(image, box), self.box: box_text(box), self.corner: None, self.status: gr.skip()}
 
     # -- jobs ----------------------------------------------------------------------------------------------
-    def submit(self, files: list[str] | None, preset: str, box: str, card_kind: str, jobs: list[str]) -> dict:
-        """Queue the uploads as one job; every problem is one line in the status."""
+    def submit(self, files: list[str] | None, preset: str, box: str, card_kind: str, jobs: list[str],
+               person: bool = False) -> dict:
+        """Queue the uploads as one job (``person``: its photos fitted as one person); every problem is one line in
+        the status."""
         try:
             card = parse_box(box)
             config = self.config.fit_config(preset, card, CARD_REFLECTANCES.get(card_kind) if card else None)
@@ -175,7 +188,8 @@ class WebApp:
                     self.timer: gr.Timer(active=bool(self._unfinished(jobs)))}
         job_id, folder = self.service.new_folder()
         staged = stage_uploads(files, folder, self.config.max_files)
-        inputs = [InputState(file, item) for file, item in zip(staged.files, staged.items, strict=True)]
+        pairs = one_person(staged) if person else list(zip(staged.files, staged.items, strict=True))
+        inputs = [InputState(file, item) for file, item in pairs]
         notes = list(staged.refused)
         if card and not config.tone.scene_light_prior:
             notes.append(f"the grey card is not used: the {preset} preset does not estimate the light level")

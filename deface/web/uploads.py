@@ -17,7 +17,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from deface.io.images import InputError, load_image, one_line
-from deface.io.inputs import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, InputItem, classify
+from deface.io.inputs import IMAGE_EXTENSIONS, VIDEO_EXTENSIONS, InputItem, classify, person_input
 from deface.io.video import read_spread_frames
 
 INPUTS_DIR = "inputs"
@@ -63,6 +63,21 @@ def stage_uploads(uploads: list[str | Path], folder: Path, max_files: int) -> St
         items.append(InputItem(target, kind))
         files.append(original)
     return StagedInputs(items, files, refused)
+
+
+PERSON = "person"
+"""The output name of a job's photos fitted as one person."""
+
+
+def one_person(staged: StagedInputs) -> list[tuple[str, InputItem]]:
+    """(name shown, input) of a job whose photos are one person: its photos as one input (with two or more),
+    a clip on its own."""
+    photos = [(file, item) for file, item in zip(staged.files, staged.items, strict=True) if item.kind == "image"]
+    others = [(file, item) for file, item in zip(staged.files, staged.items, strict=True) if item.kind != "image"]
+    if len(photos) < 2:
+        return photos + others
+    person = person_input(PERSON, [item for _, item in photos])
+    return [(" + ".join(file for file, _ in photos), person), *others]
 
 
 def safe_stem(stem: str) -> str:
