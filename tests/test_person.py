@@ -171,3 +171,46 @@ def test_the_web_page_fits_a_jobs_photos_as_one_person_and_a_clip_on_its_own(tmp
     assert [path.name for path in pairs[0][1].photos] == ["front.jpg", "side.png"]
     alone = one_person(stage_uploads(uploads[:1], tmp_path / "job2", 10))
     assert [(shown, item.kind) for shown, item in alone] == [("front.jpg", "image")]  # one photo: a plain fit
+
+
+def test_each_photo_chooses_among_its_own_lights_only():
+    import torch
+
+    from deface.fit.config import DecoupleConfig
+    from deface.fit.decoupling import Decoupling
+
+    torch.manual_seed(0)
+    coverage = torch.ones(12, 10)
+    grouped = Decoupling(DecoupleConfig(), num_lights=6, num_frames=2, size=(10, 12), light_groups=(0, 1))
+    shared = Decoupling(DecoupleConfig(), num_lights=6, num_frames=2, size=(10, 12))
+    shared.load_state_dict(grouped.state_dict())
+    for frame, own in ((0, slice(0, 3)), (1, slice(3, 6))):
+        masks = grouped.light_masks(frame, coverage).detach()
+        others = torch.ones(6, dtype=torch.bool)
+        others[own] = False
+        assert masks.shape == (6, 12, 10) and float(masks[others].abs().max()) == 0.0
+        torch.testing.assert_close(masks.sum(0), coverage)
+        # within its group, the shared field's masks renormalised over the group (softmax over a subset)
+        plain = shared.light_masks(frame, coverage).detach()[own]
+        torch.testing.assert_close(masks[own], plain / plain.sum(0, keepdim=True))
+
+
+def test_ace_judges_each_photos_lights_on_its_own_frames():
+    import torch
+
+    from deface.fit.config import DecoupleConfig
+    from deface.fit.decoupling import Decoupling
+
+    frames, lights = 4, 8  # four photos of two lights each
+    decoupling = Decoupling(DecoupleConfig(epsilon=0.3, light_masks=False), lights, frames, (4, 4),
+                            light_groups=(0, 1, 2, 3))
+    masks = torch.zeros(frames, lights, 4, 4)
+    for frame in range(frames):
+        masks[frame, 2 * frame] = 0.8  # each photo: its first light lit most of the face
+        masks[frame, 2 * frame + 1] = 0.2
+    kept = decoupling.run_ace(masks, torch.ones(frames, 4, 4))
+    # pooled over all frames each light covers at most 0.2 of the face and none would pass epsilon 0.3
+    assert kept == [0, 2, 4, 6]
+    for frame in range(frames):
+        masks_now = decoupling.light_masks(frame, torch.ones(4, 4))
+        assert masks_now.shape[0] == 4 and float(masks_now[frame].min()) == 1.0  # its one kept light, whole

@@ -60,6 +60,10 @@ class LightConfig:
     Either value is written into every coefficient of light i."""
     init_scale: float = 1.0
     """L of the code's formula (1.5 in most of the authors' configs); the paper's formula is L = 1."""
+    per_photo: bool = True
+    """Several photos of one person (``deface fit --person``): each photo gets its own n lights, its masks choose
+    among them only (its light is its own: the sun in one, a lamp in another). Off: the photos share n lights, as a
+    clip's frames always do (the paper's video mode)."""
 
 
 @dataclass(frozen=True)

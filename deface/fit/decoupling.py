@@ -20,8 +20,13 @@ from deface.fit.config import DecoupleConfig
 class Decoupling(torch.nn.Module):
     """f, g and their inputs for T frames of size H x W."""
 
-    def __init__(self, config: DecoupleConfig, num_lights: int, num_frames: int, size: tuple[int, int]):
+    def __init__(self, config: DecoupleConfig, num_lights: int, num_frames: int, size: tuple[int, int],
+                 light_groups: tuple[int, ...] | None = None):
+        """``light_groups``: per frame, the group whose lights its masks choose among (the ``num_lights`` split into
+        equal consecutive groups: several photos, each with its own lights); None: every frame all lights."""
         super().__init__()
+        self.light_groups = tuple(light_groups) if light_groups is not None else None
+        self.group_size = num_lights // len(set(light_groups)) if light_groups is not None else num_lights
         width, height = size
         self.config = config
         self.light_field = (
@@ -49,12 +54,12 @@ class Decoupling(torch.nn.Module):
     def light_masks(self, frame: int, coverage: torch.Tensor) -> torch.Tensor:
         """M_L [K_kept, H, W] = M_R * f (renormalised over kept lights), or uniform without f."""
         if self.light_field is None:
-            uniform = torch.full((len(self._kept), *coverage.shape), 1.0 / len(self._kept))
-            return uniform * coverage
+            share = self._allowed(frame, coverage.dtype)
+            return (share / share.sum())[:, None, None] * coverage
         # f only where the face is rendered: M_N = M_R * f is zero elsewhere, and this halves the cost.
         covered = coverage > 0
         masks = coverage.new_zeros((*coverage.shape, len(self._kept)))  # [H, W, K_kept]
-        masks = masks.index_put((covered,), self.light_field(self._coordinates(frame, covered.shape)[covered]))
+        masks = masks.index_put((covered,), self._frame_masks(frame, self._coordinates(frame, covered.shape)[covered]))
         masks = masks.permute(2, 0, 1) * coverage
         if not self._evidence or self.config.mask_fill <= 0 or masks.shape[0] < 2:
             return masks
@@ -62,6 +67,22 @@ class Decoupling(torch.nn.Module):
         side = max(coverage.shape)
         filled = fill_from_evidence(masks, evidence, self.config.mask_fill * side, self.config.mask_fill_near * side)
         return filled * coverage
+
+    def _frame_masks(self, frame: int, coords: torch.Tensor) -> torch.Tensor:
+        """f at ``coords`` [N, 3] over the kept lights [N, K_kept]; with light groups, renormalised over the kept
+        lights of the frame's group (0 for the others: the softmax over that subset)."""
+        masks = self.light_field(coords)
+        if self.light_groups is None:
+            return masks
+        masks = masks * self._allowed(frame, masks.dtype)
+        return masks / masks.sum(-1, keepdim=True).clamp_min(1e-12)
+
+    def _allowed(self, frame: int, dtype: torch.dtype) -> torch.Tensor:
+        """[K_kept] 1 for the kept lights the frame may use (its group's; all without groups), else 0."""
+        if self.light_groups is None:
+            return torch.ones(len(self._kept), dtype=dtype)
+        group = self.light_groups[frame]
+        return torch.tensor([k // self.group_size == group for k in self._kept], dtype=dtype)
 
     def _evidence_at(self, frame: int, shape: tuple[int, int]) -> torch.Tensor:
         """The evidence [H, W] of ``frame`` at ``shape`` (resampled from the size it was set at)."""
@@ -100,7 +121,16 @@ class Decoupling(torch.nn.Module):
 
     def run_ace(self, all_masks: torch.Tensor, coverage: torch.Tensor) -> list[int]:
         """Select kept lights from M_N [T, n, H, W] (all lights) and M_R [T, H, W]; returns kept indices."""
-        kept = ace_select(all_masks, coverage, self.config.epsilon, self.config.area_normaliser)
+        if self.light_groups is None:
+            kept = ace_select(all_masks, coverage, self.config.epsilon, self.config.area_normaliser)
+        else:  # each group's lights judged on its own frames: a photo's light is not diluted by the others'
+            kept = []
+            for group in sorted(set(self.light_groups)):
+                frames = [t for t, g in enumerate(self.light_groups) if g == group]
+                lights = list(range(group * self.group_size, (group + 1) * self.group_size))
+                chosen = ace_select(all_masks[frames][:, lights], coverage[frames], self.config.epsilon,
+                                    self.config.area_normaliser)
+                kept += [lights[i] for i in chosen]
         self._kept = kept
         if self.light_field is not None:
             self.light_field.keep(kept)

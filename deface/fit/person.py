@@ -99,4 +99,4 @@ def person_target(photos: list[np.ndarray], landmarks: list[Landmarks], sources:
     frames = [cut_square(photo, crop.box, side) for photo, crop in zip(photos, crops, strict=True)]
     working = [crop_landmarks(found, crop.box, side) for found, crop in zip(landmarks, crops, strict=True)]
     scale = side / float(np.median([crop.side for crop in crops]))
-    return FitTarget(frames, working, scale), crops
+    return FitTarget(frames, working, scale, light_groups=tuple(range(len(frames)))), crops

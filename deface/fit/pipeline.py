@@ -218,6 +218,7 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     result = fit_landmarks(model, corr, target.landmarks, target.size, config.stage1, config.iterations.stage1,
                            principal_point=target.principal_point, photo_side=max(target.framing.scene_size))
     log.stop("stage 1")
+    groups = target.light_groups if config.lights.per_photo else None
     landmarks = LandmarkTarget(corr, torch.as_tensor(result.landmarks_2d, dtype=torch.float32),
                                torch.as_tensor(corr.weights, dtype=torch.float32),
                                face_size=_face_sizes(target), units=config.weights.landmark_units)
@@ -225,9 +226,9 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
         identity=torch.as_tensor(result.identity), expression=torch.as_tensor(result.expression),
         rotation=torch.as_tensor(result.rotation), translation=torch.as_tensor(result.translation),
         focal=torch.as_tensor(result.focal), albedo=torch.zeros(model.albedo.num_coeffs),
-        lights=initial_lights(config.lights), tone=initial_tone(model, config),
+        lights=initial_lights(config.lights).repeat(len(set(groups or [0])), 1, 1), tone=initial_tone(model, config),
     )
-    decoupling = Decoupling(config.decouple, config.lights.num_lights, target.num_frames, target.size)
+    decoupling = Decoupling(config.decouple, scene.lights.shape[0], target.num_frames, target.size, groups)
     face = PosedFace.create(model, scene, config, target)
     texture_size = choose_texture_size(face, target, config, log)
     classifier, note = face_classifier(face, target, config, models_dir, log)

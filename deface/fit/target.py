@@ -28,6 +28,8 @@ class FitTarget:
     framing: Framing | None = None  # where the frames lie in the input's (None: the whole input at ``scale``)
     scene_srgb: list[np.ndarray] | None = None  # T x [Hs, Ws, 3] the whole input frames at the working scale
     # (the illuminant's evidence, render.png's photo); None when the frames are the whole input
+    light_groups: tuple[int, ...] | None = None  # per frame, the photo whose lights it uses (several photos of one
+    # person, deface/fit/person.py); None: every frame shares the lights (a photo, a clip)
     images: torch.Tensor = field(init=False)  # [T, H, W, 3] linear RGB
     clipped: torch.Tensor = field(init=False)  # [T, H, W, 3] bool: channels at the encoding's top (CLIPPED)
 
