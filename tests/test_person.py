@@ -214,3 +214,44 @@ def test_ace_judges_each_photos_lights_on_its_own_frames():
     for frame in range(frames):
         masks_now = decoupling.light_masks(frame, torch.ones(4, 4))
         assert masks_now.shape[0] == 4 and float(masks_now[frame].min()) == 1.0  # its one kept light, whole
+
+
+def _truth_folder(tmp_path, rows: list[str], header: str):
+    from PIL import Image
+
+    for sub in ("images", "albedo"):
+        (tmp_path / sub).mkdir(parents=True)
+    for row in rows:
+        file = row.split("\t")[0]
+        Image.new("RGB", (8, 8)).save(tmp_path / "images" / file)
+        Image.new("RGB", (8, 8)).save(tmp_path / "albedo" / f"{file.split('_')[0]}.png")
+    (tmp_path / "MANIFEST.tsv").write_text("\n".join([header, *rows]) + "\n")
+    return tmp_path
+
+
+def test_a_truth_folders_sets_are_its_albedos_and_set_column(tmp_path):
+    from deface.eval.person_benchmark import read_truth_sets
+
+    sets = read_truth_sets(_truth_folder(tmp_path / "a", ["x_s1_1.png\tx\tone", "x_s1_2.png\tx\tone",
+                                                          "x_s2_1.png\tx\ttwo", "y_s1_1.png\ty\tone"],
+                                         "file\ttone\tset"))
+    assert [(s.stem, [r.file for r in s.renders]) for s in sets] == [
+        ("x_one", ["x_s1_1.png", "x_s1_2.png"]), ("x_two", ["x_s2_1.png"]), ("y_one", ["y_s1_1.png"])]
+    plain = read_truth_sets(_truth_folder(tmp_path / "b", ["x_even.png\tx", "x_key.png\tx", "y_even.png\ty"],
+                                          "file\ttone"))
+    assert [(s.stem, len(s.renders)) for s in plain] == [("x_all", 2), ("y_all", 1)]
+
+
+def test_a_sets_table_row_holds_the_set_beside_its_photos_alone():
+    from deface.eval.person_benchmark import set_line, sets_markdown
+
+    def scores(psnr, kept):
+        return {"face": {"psnr": psnr, "colour_error": 2.0}, "beard": {"darkness_kept": kept, "fine_structure": 0.1}}
+
+    record = {"scores": scores(30.0, 0.9), "alone": {"a": scores(27.0, 0.5), "b": scores(28.0, 0.7)},
+              "photos": ["a.png", "b.png"], "seconds": 12.0, "surface_cm": 0.2,
+              "alone_surface_cm": {"a": 0.4, "b": 0.3}}
+    row = [line for line in sets_markdown({"default": {"x_one": record}}, "t", "cmd").splitlines()
+           if line.startswith("| default")][0]
+    assert "| 30.00 | 28.00 / 27.50 |" in row and "0.90 (0.60)" in row and "0.20 (0.35)" in row
+    assert "best 28.00, mean 27.50" in set_line("x", record)

@@ -255,6 +255,7 @@ def albedo_command(
 
         set_records = run_person_benchmark(folder, output, variants, records, jobs, models, log=console.print)
         (output / "sets.md").write_text(sets_markdown(set_records, folder.resolve().name, command + " --sets"))
+        (output / "sets.json").write_text(json.dumps(set_records, indent=1))
         console.print(f"sets: {output / 'sets.md'}")
 
 

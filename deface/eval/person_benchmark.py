@@ -117,8 +117,6 @@ def run_person_benchmark(folder: Path, out_dir: Path, variants: dict[str, FitCon
     """Fit every set with every variant {name: config} (cached in OUT/<variant>/sets/<set>/scores.json), and
     score it beside its photos fitted alone (``singles``: the albedo benchmark's records {variant: {stem: record}},
     whose fits are in OUT/<variant>/<stem>); returns {variant: {set stem: record with "alone"}}."""
-    import json
-
     sets = read_truth_sets(folder)
     runs = [(name, truth_set) for name in variants for truth_set in sets]
     tasks = [RecordedTask(f"{name} / {truth_set.stem}", Path(out_dir) / name / "sets" / truth_set.stem / "scores.json",
@@ -132,7 +130,6 @@ def run_person_benchmark(folder: Path, out_dir: Path, variants: dict[str, FitCon
                       alone_surface_cm={r.stem: singles[name][r.stem].get("surface_cm") for r in truth_set.renders})
         records[name][truth_set.stem] = record
         log(set_line(f"{name} / {truth_set.stem}", record))
-    (Path(out_dir) / "sets.json").write_text(json.dumps(records, indent=1))
     return records
 
 
