@@ -10,9 +10,11 @@ over the texels under the occluder that the fit's benchmark scores, how much of 
 
 Regions (at the albedo benchmark's score size, deface/eval/albedo_measures.py): ``frame`` (glasses: the occluded
 texels not seen through a lens), ``lens`` (seen through a lens), ``hair``, ``fingers``; and, under the key light,
-``shadow``: the texels the camera sees in the occluder's cast shadow. Each region is taken where the fit's
-benchmark scores the map (the true surface facing the fitted camera, ``albedo_benchmark.shown_texels``) and the
-true surface faces the camera unhidden by the face (``visible/``).
+``shadow``: the texels the camera sees in the occluder's cast shadow; and ``<region> mirror``: the region's mirror
+image in UV (u -> 1 - u, the ICT layout is symmetric) outside the occluder and its shadow, with the occluder's C,
+where the fit's symmetry term may copy the occluder to the other side of the face. Each region is taken where the
+fit's benchmark scores the map (the true surface facing the fitted camera, ``albedo_benchmark.shown_texels``) and
+the true surface faces the camera unhidden by the face (``visible/``).
 
 - **skin ring** of a region: the texels within :data:`RING` texels of the region grown by :data:`GROW` (below),
   widened a texel at a time (up to :data:`WIDEST`) until it holds :data:`LEAST` texels, that are scored, visible,
@@ -68,6 +70,8 @@ FEATURES = ("beard", "freckles", "birthmark")
 """The set's masks of dark features, left out of the skin ring."""
 REGIONS = {"glasses": ("frame", "lens", "shadow"), "tinted": ("frame", "lens", "shadow"),
            "strand": ("hair", "shadow"), "fingers": ("fingers", "shadow")}
+MIRRORED = 0.25
+"""A region's mirror image (u -> 1 - u) is measured when this share of it at least lies outside the occluder."""
 CLEAR = {("glasses", "lens")}
 """(occluder, region) that hide nothing: no darkness."""
 
@@ -121,12 +125,15 @@ def grown_darkness(image: np.ndarray, region: np.ndarray, wider: np.ndarray, rin
 
 
 def region_figures(fitted: np.ndarray, truth: np.ndarray, photo: np.ndarray, region: np.ndarray, ring: np.ndarray,
-                   reference: np.ndarray, wider: np.ndarray | None = None, clear: bool = False) -> dict:
+                   reference: np.ndarray, wider: np.ndarray | None = None, clear: bool = False,
+                   photo_contrast: float | None = None) -> dict:
     """The figures of one region: the map's darkness (D, and D+ over ``wider``, the grown region, when given; the
     ``ring`` outside it) and colour error, the truth's darkness, the photo's contrast and colour error. All maps
     linear [S, S, 3]; ``photo`` must be finite over the region, its ring and the ``reference`` (the plain skin both
-    maps are gain-matched to the truth on); ``clear``: an occluder that hides nothing (no darkness)."""
-    photo_contrast = contrast(photo, region, ring)
+    maps are gain-matched to the truth on); ``clear``: an occluder that hides nothing (no darkness);
+    ``photo_contrast``: C, when it is another region's (a mirrored region's is its occluder's)."""
+    if photo_contrast is None:
+        photo_contrast = contrast(photo, region, ring)
     matched = measures.gain_matched(fitted, truth, reference)
     photo_matched = measures.gain_matched(photo, truth, reference)
     nan = float("nan")
@@ -217,8 +224,16 @@ def measure_fit(set_dir: Path, fit_dir: Path, stem: str, occluder: str, albedo: 
             continue
         wider = grown(region, parts["excluded"] | ~usable | ~plain)
         ring = skin_ring(wider, excluded | whole)
-        figures[name] = region_figures(fitted, truth, photo, region, ring, reference, wider,
-                                       clear=(occluder, name) in CLEAR)
+        clear = (occluder, name) in CLEAR
+        figures[name] = region_figures(fitted, truth, photo, region, ring, reference, wider, clear=clear)
+        # the same occluder's darkness copied to the other side of the face (the fit's symmetry term)
+        mirrored = whole[:, ::-1] & ~parts["excluded"] & usable
+        if clear or mirrored.sum() < max(4, MIRRORED * region.sum()):
+            continue
+        wider = grown(mirrored, parts["excluded"] | ~usable | ~plain)
+        ring = skin_ring(wider, excluded | whole[:, ::-1])
+        figures[f"{name} mirror"] = region_figures(fitted, truth, photo, mirrored, ring, reference, wider,
+                                                   photo_contrast=figures[name]["photo_contrast"])
     return figures
 
 
@@ -238,7 +253,7 @@ COLUMNS = (("C", "photo_contrast"), ("D map", "darkness"), ("D truth", "darkness
 
 
 def _line(first: str, region: str, texels: str, ring: str, figures: dict) -> str:
-    return f"  {first:22s} {region:8s} {texels:>6s} {ring:>5s}" + "".join(
+    return f"  {first:22s} {region:15s} {texels:>6s} {ring:>5s}" + "".join(
         f" {_cell(figures[key]):>{max(len(heading), 6)}s}" for heading, key in COLUMNS)
 
 
@@ -264,7 +279,7 @@ def main() -> None:
               "dark as the occluder in the photo (truth: the reference); D+: the same within "
               f"{GROW} texels of the region; CE: colour error (RMS a*b*; the truth's is 0, the photo's = the "
               "occluder painted in)")
-        print(f"  {'render':22s} {'region':8s} {'texels':>6s} {'ring':>5s}"
+        print(f"  {'render':22s} {'region':15s} {'texels':>6s} {'ring':>5s}"
               + "".join(f" {heading:>{max(len(heading), 6)}s}" for heading, _ in COLUMNS))
         table: dict[tuple[str, str], list[dict]] = {}
         for row in rows:

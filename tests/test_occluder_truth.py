@@ -145,3 +145,13 @@ def test_a_clear_occluder_has_no_darkness_but_a_colour_error():
     figures = occluder_truth.region_figures(truth * 1.1, truth, photo, REGION, ring, REFERENCE, clear=True)
     assert np.isnan(figures["darkness"]) and np.isnan(figures["darkness_truth"])
     assert figures["colour_error"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_given_photo_contrast_is_used_as_it_is():
+    """A mirrored region's photo shows skin; its darkness is measured against its occluder's contrast."""
+    truth, photo, ring, _ = _scene()
+    painted = truth.copy()
+    painted[REGION] = painted[ring].mean(0) * 0.4  # 60 % darker than the skin around it
+    figures = occluder_truth.region_figures(painted, truth, truth * 0.7, REGION, ring, REFERENCE, photo_contrast=0.4)
+    assert figures["photo_contrast"] == 0.4
+    assert figures["darkness"] == pytest.approx(1.0, abs=0.01)
