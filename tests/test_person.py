@@ -75,6 +75,8 @@ def test_photos_of_different_sizes_become_frames_of_one_size():
 def test_square_box_is_centred_and_records_the_photo_camera():
     box = square_box(np.array([[10.0, 20.0], [30.0, 60.0]]), margin=2.0)
     assert box == (-20.0, 0.0, 60.0, 80.0)  # a square of 2 x 40 around (20, 40)
+    assert square_box(np.array([[10.0, 20.0], [30.0, 60.0]]), 2.0, (100, 70)) == (0.0, 0.0, 80.0, 80.0)
+    # moved right into the photo; taller than the photo (70): left where it was along y
     record = PhotoCrop("a.jpg", (100, 100), box).record(focal=500.0, side=200)
     assert record["camera"] == {"focal_px": 200.0, "principal_point": [20.0, 40.0]}
 

@@ -2,8 +2,8 @@
 
 The fit's frames share one size, one focal length and a principal point at their centre (deface/fit/scene.py), and
 a clip's frames share one crop (deface/fit/framing.py). Photos come from different cameras, sizes and distances, so
-each photo is cut to its own square around its face (``crop.margin`` x its landmarks' box, the photo's edge pixels
-repeated where the square leaves it) and resized to one working side. Each crop is then treated as the frame of a
+each photo is cut to its own square around its face (``crop.margin`` x its landmarks' box, moved inside the photo
+where it fits, the photo's edge pixels repeated where it does not) and resized to one working side. Each crop is then treated as the frame of a
 camera looking at the face's centre: its principal point is the crop's centre, not the photo's. For a face near a
 wide photo's edge the true camera sees it a few degrees obliquely; the frame's own rotation takes that up, and the
 perspective (the shared focal length) differs by the few percent faces' depths allow. Shared across the photos:
@@ -47,12 +47,19 @@ class PhotoCrop:
         return record
 
 
-def square_box(points: np.ndarray, margin: float) -> tuple[float, float, float, float]:
-    """The square of side ``margin`` x the longer side of the box of ``points`` [P, 2], centred on it."""
+def square_box(points: np.ndarray, margin: float,
+               size: tuple[int, int] | None = None) -> tuple[float, float, float, float]:
+    """The square of side ``margin`` x the longer side of the box of ``points`` [P, 2], centred on it; with the
+    photo's ``size`` (width, height), moved inside the photo along each axis the square fits in (as a photo's crop
+    is, deface/fit/framing.py), so that few of its pixels are the photo's repeated edge."""
     low, high = points.min(0).astype(np.float64), points.max(0).astype(np.float64)
     centre, side = (low + high) / 2, margin * max(float((high - low).max()), 1.0)
-    return (float(centre[0] - side / 2), float(centre[1] - side / 2),
-            float(centre[0] + side / 2), float(centre[1] + side / 2))
+    start = centre - side / 2
+    if size is not None:
+        for axis, length in enumerate(size):
+            if side <= length:
+                start[axis] = min(max(start[axis], 0.0), length - side)
+    return float(start[0]), float(start[1]), float(start[0] + side), float(start[1] + side)
 
 
 def cut_square(photo: np.ndarray, box: tuple[float, float, float, float], side: int) -> np.ndarray:
@@ -93,8 +100,10 @@ def person_target(photos: list[np.ndarray], landmarks: list[Landmarks], sources:
                   config: FitConfig) -> tuple[FitTarget, list[PhotoCrop]]:
     """The target of one person's ``photos`` (sRGB [H, W, 3] of any sizes) whose ``landmarks`` were found on them:
     each cut to the square around its face and resized to one side (module doc); with where each crop lies."""
-    crops = [PhotoCrop(source, (photo.shape[1], photo.shape[0]), square_box(found.points, config.crop.margin))
-             for photo, found, source in zip(photos, landmarks, sources, strict=True)]
+    crops = []
+    for photo, found, source in zip(photos, landmarks, sources, strict=True):
+        size = (photo.shape[1], photo.shape[0])
+        crops.append(PhotoCrop(source, size, square_box(found.points, config.crop.margin, size)))
     side = working_side(crops, config)
     frames = [cut_square(photo, crop.box, side) for photo, crop in zip(photos, crops, strict=True)]
     working = [crop_landmarks(found, crop.box, side) for found, crop in zip(landmarks, crops, strict=True)]
