@@ -115,6 +115,11 @@ def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, tmp_pa
     assert record["kind"] == "person" and [p["path"] for p in record["photos"]] == [
         str(images / "ita30_even.png"), str(images / "ita30_key.png")]
     assert record["left_out"] == [str(tmp_path / "blank.png")]
+    side = params["camera"]["width"]
+    assert params["camera"]["principal_point"] == [side / 2, side / 2] and "input.photos" in params["camera"]["pixels"]
+    for photo in record["photos"]:  # each frame's camera in its photo's pixels: the working focal x square / side
+        square = photo["box"][2] - photo["box"][0]
+        assert photo["camera"]["focal_px"] == pytest.approx(params["camera"]["focal_px"] * square / side, rel=1e-3)
     page = (folder / "report.html").read_text()
     for frame, photo in (("000", "report/input.png"), ("001", "report/input_001.png")):
         assert (folder / "frames" / frame / "render.png").is_file() and (folder / photo).is_file()

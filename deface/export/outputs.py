@@ -114,7 +114,8 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
         "pose": {"rotation_axis_angle": _np(result.pose.rotation).tolist(),
                  "translation_cm": _np(result.pose.translation).tolist(),
                  "convention": "model -> camera; camera x right, y down, z forward (OpenCV)"},
-        "camera": _camera(result, record.get("file_size")),
+        "camera": _person_camera(result) if record.get("kind") == "person" else _camera(result,
+                                                                                      record.get("file_size")),
         "crop": result.framing.record(),
         "lights": light_record(result.renderer, result.lights.sh, kept, config.lights.bands),
         "textures": {"size": int(result.textures.diffuse.shape[0]),
@@ -162,6 +163,15 @@ def _camera(result: FitOutput, file_size: list[int] | None = None) -> dict:
         camera["file"] = {"focal_px": focal * ratio, "width": int(file_size[0]), "height": int(file_size[1]),
                           "principal_point": [file_size[0] / 2, file_size[1] / 2]}
     return camera
+
+
+def _person_camera(result: FitOutput) -> dict:
+    """A fit of several photos: the working frames' camera (each photo's own is in ``input.photos``)."""
+    width, height = result.framing.size
+    return {"focal_px": float(result.pose.focal), "width": width, "height": height,
+            "principal_point": [width / 2, height / 2],
+            "pixels": "the working frames: each photo's square around its face, resized (input.photos[i] gives the "
+                      "square's box and the frame's camera in that photo's pixels)"}
 
 
 def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
