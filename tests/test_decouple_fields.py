@@ -78,6 +78,7 @@ def test_fourier_option_changes_input_width_only():
     assert field(pixel_coordinates(2, 2)).shape == (2, 2, 3)
 
 
+@pytest.mark.slow
 def test_uniform_start_gives_every_light_an_equal_mask_until_a_gradient_splits_them():
     torch.manual_seed(0)
     field = LightMaskField(3, fourier_frequencies=4, uniform_start=True)

@@ -30,6 +30,7 @@ def _photo(photos, name: str, longer: int | None = None) -> np.ndarray:
     return np.asarray(image, np.float32) / 255.0
 
 
+@pytest.mark.slow
 def test_same_photo_near_zero_and_degraded_copies_close(scorer, photos):
     photo = _photo(photos, "000031.jpg")
     noisy = np.clip(photo + np.random.default_rng(0).normal(0, 0.02, photo.shape), 0, 1).astype(np.float32)

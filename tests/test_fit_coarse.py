@@ -64,6 +64,7 @@ def _context(size: int, **settings):
     return prepare(FitTarget([face.image_srgb], [face.landmarks], 1.0), config)[0]
 
 
+@pytest.mark.slow
 def test_the_half_size_level_shares_the_parameters_and_measures_landmarks_in_working_pixels(shared):
     context = _context(48)
     coarse = coarse_context(context)
@@ -80,6 +81,7 @@ def test_the_half_size_level_shares_the_parameters_and_measures_landmarks_in_wor
     assert masks.shape[1:] == coverage.shape and torch.allclose(masks.sum(0), coverage, atol=1e-5)
 
 
+@pytest.mark.slow
 def test_stage2_runs_its_first_steps_at_half_size_then_at_the_working_size(shared):
     context = _context(48, **{"iterations.stage2": 6, "decouple.ace_iteration": 2,
                               "iterations.stage2_coarse_share": 0.5, "iterations.coarse_min_side": 16})

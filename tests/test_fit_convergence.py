@@ -26,6 +26,7 @@ def test_converged_compares_window_means():
     assert converged(slow, window=10, tolerance=0.011) and not converged(slow, window=10, tolerance=0.009)
 
 
+@pytest.mark.slow
 def test_stages_stop_early_and_say_so(shadowed_small):
     image, landmarks, scale = shadowed_small
     config = override(presets.get("default"), **{

@@ -64,6 +64,7 @@ def test_decoupling_keeps_cast_shadow_out_of_texture(shadowed_face):
     assert ours_error < 0.7 * baseline_error, (ours_error, baseline_error)
 
 
+@pytest.mark.slow
 def test_fits_are_deterministic_for_a_seed(shadowed_face):
     short = {**SHORT, "iterations.stage1": 30, "iterations.stage2": 12, "iterations.stage3": 4,
              "decouple.ace_iteration": 6, "resolution": 64, "texture_size": 64, "render.shadow_rays": 16}

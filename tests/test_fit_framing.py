@@ -105,6 +105,7 @@ def test_a_small_face_is_decoded_at_the_size_its_crop_needs_within_the_file_and_
     assert max(framing.size) == pytest.approx(512, abs=2) and framing.scale == pytest.approx(1.0, abs=0.01)
 
 
+@pytest.mark.slow
 def test_a_photo_whose_face_is_small_is_decoded_larger_for_it(photos, tmp_path):
     """deface/batch/task.py load_photo: a 160-px face in a 4000 x 3000 JPEG is 82 px at the decoder's 2048; the photo
     is decoded at the size that gives the face's crop the fit's resolution, and the face keeps the file's pixels."""
@@ -268,6 +269,7 @@ def test_the_fit_of_the_crop_has_the_camera_of_a_fit_of_the_whole_canvas(canvas,
     assert np.linalg.norm(projected - canvas.landmarks.points, axis=1).mean() < 1.5
 
 
+@pytest.mark.slow
 def test_the_fit_of_the_crop_lands_on_the_canvas_pixels(canvas, cropped_fit, tmp_path):
     fit = cropped_fit
     camera = fit.framing.input_camera(fit.frames[0].geometry.camera)

@@ -155,6 +155,7 @@ def test_params_record_the_tone_and_the_scene_light(neutral_fits, tmp_path):
     assert any(f"skin tone of the texture: ITA {tone['texture_ita']:.1f}" in note for note in params["notes"])
 
 
+@pytest.mark.slow
 def test_a_grayscale_photo_keeps_the_model_mean_tone_and_says_so(shared):
     from deface.fit.pipeline import prepare
 
@@ -167,6 +168,7 @@ def test_a_grayscale_photo_keeps_the_model_mean_tone_and_says_so(shared):
     assert any("grayscale" in note for note in log.notes)
 
 
+@pytest.mark.slow
 def test_a_reference_card_fixes_the_exposure_the_scene_cannot_tell(shared):
     """A room lit 1.7 times brighter than the white point could be a paler room at the photo's exposure (the
     grey world and the white point share the difference: W about 1.3), so the skin starts too light (ITA 42 for

@@ -101,6 +101,7 @@ def test_video_frames_with_stride(shared):
         read_video_frames(path, stride=0)
 
 
+@pytest.mark.slow
 def test_spread_frames_match_the_full_decode(shared):
     path = shared / "data" / "videos" / "d18.mp4"
     every, _ = read_video_frames(path, stride=4)

@@ -64,6 +64,7 @@ def test_a_colour_checker_gives_the_lights_level_and_colour():
     assert left == pytest.approx(220 / 384, abs=0.02) and bottom == pytest.approx(330 / 384, abs=0.02)
 
 
+@pytest.mark.slow
 @needs_detector
 def test_no_chart_and_a_blown_out_chart_give_nothing():
     assert checker.find_checker(photo_with_chart(LIGHT, chart=False)) is None

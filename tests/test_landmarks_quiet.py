@@ -5,6 +5,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from deface.landmarks.quiet import is_notice
 
 SCRIPT = """
@@ -29,6 +31,7 @@ def test_notice_patterns():
     assert not is_notice("Traceback (most recent call last):")
 
 
+@pytest.mark.slow
 def test_detection_prints_no_native_notices(photos):
     done = subprocess.run([sys.executable, "-c", SCRIPT, str(photos / "000031.jpg")], capture_output=True,
                           text=True, timeout=300)
