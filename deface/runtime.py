@@ -1,4 +1,4 @@
-"""Process settings a fit runs faster with.
+"""Process settings a fit runs with: ``torch_threads``, and ``keep_freed_memory`` (faster).
 
 ``keep_freed_memory``: every optimisation step allocates and frees the same ~100 MB of temporaries (f's
 activations, per-light images, the supersampled buffers). glibc's malloc serves blocks above its mmap threshold
@@ -14,6 +14,10 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import platform
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import torch
 
 _M_TRIM_THRESHOLD = -1  # glibc mallopt parameters (malloc.h)
 _M_MMAP_THRESHOLD = -3
@@ -41,3 +45,15 @@ def _mallopt() -> bool:
     # mallopt returns 1 on success; setting the mmap threshold also stops glibc adapting it
     return bool(libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_MAX)) and bool(
         libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
+
+
+@contextmanager
+def torch_threads(count: int) -> Iterator[None]:
+    """Run with ``count`` torch threads (0: leave torch's default), restoring the previous setting."""
+    previous = torch.get_num_threads()
+    if count > 0:
+        torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)

@@ -38,14 +38,25 @@ def test_every_preset_survives_params_json():
         assert _json_round_trip(config) == config, name
 
 
-def test_params_json_of_runs_before_the_render_settings_moved_still_reads():
-    """Earlier params.json files have shadows, shadow_rays, ... at the top level (RENAMED)."""
-    config = override(presets.get("fast"), **{"render.shadow_rays": 48, "render.supersampling": 1})
-    data = json.loads(json.dumps(to_dict(config)))
-    render = data.pop("render")
-    data.update({old: render[new.split(".")[1]] for old, new in RENAMED.items()})
-    assert from_dict(data) == config
+def test_params_json_of_runs_before_the_settings_moved_still_reads():
+    """Earlier params.json files have shadows, shadow_rays, ... at the top level, and later ones the fit's
+    shadow refresh and render blur under "render" (RENAMED): both read as today's config."""
+    config = override(presets.get("fast"), **{"render.shadow_rays": 48, "render.supersampling": 1,
+                                              "iterations.shadow_refresh_every": 7, "decouple.render_blur": True})
+    current = json.loads(json.dumps(to_dict(config)))
+    top_level, nested = json.loads(json.dumps(current)), json.loads(json.dumps(current))
+    for old, new in RENAMED.items():
+        group, name = new.split(".")
+        data = nested if "." in old else top_level
+        value = data[group].pop(name)
+        if "." in old:
+            data["render"][name] = value
+        else:
+            data[old] = value
+    assert "render_blur" in nested["render"] and "render_blur" in top_level
+    assert from_dict(top_level) == config and from_dict(nested) == config
     assert override(config, shadow_rays=32).render.shadow_rays == 32  # old dotted paths too
+    assert override(config, **{"render.render_blur": False}).decouple.render_blur is False
 
 
 def test_params_json_written_with_the_former_defaults_replays_as_it_ran():

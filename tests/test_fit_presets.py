@@ -67,7 +67,7 @@ def test_baselines_keep_the_model_mean_skin_and_free_lights():
 def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():
     for name in presets.names():
         config = presets.get(name)
-        assert config.render.supersampling == 2 and config.render.render_blur is False, name
+        assert config.render.supersampling == 2 and config.decouple.render_blur is False, name
 
 
 def test_a_preset_with_a_misspelt_path_or_a_wrong_type_fails_when_written():

@@ -7,6 +7,7 @@ fit time, SH identities, OpenCV's HDR writer)."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 
@@ -96,11 +97,15 @@ def test_output_is_frozen_and_renders_what_was_written(state, written):
         output.textures = None  # frozen dataclass
     face = to_uint8(output.render()[0].face.numpy(), srgb=True)
     assert np.array_equal(face, np.asarray(Image.open(written / "render_face.png")))
+    own, again = output.renders[0], output.render()[0]  # the renders written are the re-render's, exactly
+    for name in ("face", "light_masks", "face_region", "light_images"):
+        assert torch.equal(getattr(own, name), getattr(again, name)), name
 
 
 def test_load_fit_re_renders_the_fit_within_one_level(written):
     fit = load_fit(written)
     rendered = fit.render()[0]
+    assert torch.equal(fit.renders[0].face, rendered.face)
     for image, name in ((rendered.face, "render_face.png"), (fit.composite(rendered, 0), "render.png")):
         ours = to_uint8(image.numpy(), srgb=True).astype(int)
         reference = np.asarray(Image.open(written / name)).astype(int)
@@ -128,7 +133,7 @@ def test_transfer_is_the_evaluation_swap_and_own_textures_give_the_fit(written, 
     assert torch.equal(swapped.face, fit.render()[0].face)
     grey = type(fit.textures)(torch.full_like(fit.textures.diffuse, 0.5), fit.textures.specular,
                               fit.textures.roughness)
-    other = type(fit)(**{**fit.__dict__, "textures": grey})
+    other = dataclasses.replace(fit, textures=grey)
     assert not torch.equal(transfer_renders(other, fit)[0].face, swapped.face)
     result = CliRunner().invoke(app, ["transfer", str(written), str(written), "-o", str(tmp_path / "swap")])
     assert result.exit_code == 0, result.output

@@ -19,13 +19,14 @@ from deface.fit.framing import decode_side, face_box
 from deface.fit.guard import NonFiniteError
 from deface.fit.log import FitLog
 from deface.fit.output import FitOutput
-from deface.fit.pipeline import fit, fit_photos, torch_threads
+from deface.fit.pipeline import fit, fit_photos
 from deface.io.images import LOAD_MAX_PIXELS, LOAD_MAX_SIDE, InputError, image_size, load_image, one_line
 from deface.io.inputs import InputItem
 from deface.io.video import read_spread_frames
 from deface.landmarks.detect import NoFaceError, detect_landmarks
 from deface.paths import ModelFileError
 from deface.report.html import write_report
+from deface.runtime import torch_threads
 
 # Failures of one input that are explained by their message (OSError: disk, permissions, missing files).
 EXPECTED_ERRORS = (InputError, NoFaceError, ModelFileError, OutputError, NonFiniteError, ValueError, OSError)

@@ -92,8 +92,8 @@ def fit_command(
             threads=threads, card=card, card_reflectance=card_reflectance, card_facing=card_facing, white=white,
             checker=checker,
         )
-        items = people_inputs(inputs, person, people)
         batch = _batch_options(jobs, engine, ray_address, ray_outputs, overwrite, retry_failed, quiet, verbose)
+        items = people_inputs(inputs, person, people)
     except (InputError, ValueError, OSError) as error:
         report_error(error)
         raise typer.Exit(EXIT_USAGE) from None

@@ -54,7 +54,7 @@ def score_fit(result: FitOutput, renders: list | None = None) -> tuple[dict, lis
     ``"identity"`` when dlib is installed and the photo has a face), and the sRGB outputs."""
     photos = [frame.photo_srgb for frame in result.frames]
     scores, outputs, pasted = [], [], []
-    for frame, rendered in enumerate(renders or result.render()):
+    for frame, rendered in enumerate(renders or result.renders):
         output = linear_to_srgb(_np(rendered.face).clip(0, 1))
         mask = _np(rendered.coverage * result.frames[frame].face_classifier)
         scores.append(score_images(output, photos[frame], mask))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -70,13 +71,14 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     seen, confidence = (arrays[name].astype(np.float32) if name in arrays else None
                         for name in ("texture_seen", "confidence"))
     illuminant = params.get("illuminant")
-    return FitOutput(
+    fit = FitOutput(
         model=model, config=config, frames=tuple(frames), pose=pose,
         albedo=FitAlbedo(_tensor(arrays["albedo"]), _tone(params)),
         lights=FitLights(_tensor(arrays["lights"]), tuple(int(k) for k in arrays["kept"])),
         textures=textures, texels=FitTexels(None, seen, confidence, views),
         illuminant=None if illuminant is None else IlluminantEstimate.from_record(illuminant),
-        framing=framing, kept_frames=None, record=record, renderer=renderer)
+        framing=framing, kept_frames=None, record=record, renders=())
+    return replace(fit, renders=tuple(fit.render()))
 
 
 def _read(folder: Path) -> tuple[dict[str, np.ndarray], dict]:

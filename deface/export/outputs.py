@@ -47,7 +47,7 @@ def write_fit(result: FitOutput, final_folder: Path, record: dict,
     """Write everything for ``result`` atomically into ``final_folder``; ``record`` adds input details. ``page``
     (``deface.report.html.write_report``, which the batch passes) writes the fit's page into the staged folder,
     so that it appears with the rest."""
-    renders = result.render()
+    renders = result.renders
     with staged_directory(final_folder) as folder:
         _write_textures(result, folder)
         _write_mesh(result, folder)

@@ -92,6 +92,10 @@ class DecoupleConfig:
     """L_pho takes a clipped channel of the photo (sRGB >= 0.98) as a lower bound, not a value: a render above
     it costs nothing (deface/losses/photometric.py); a clipped channel says only that the skin is at least that
     bright, part of keeping the person's skin tone (docs/skin-tone.md). Off: the paper's loss."""
+    render_blur: bool = False
+    """L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
+    their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
+    almost invisible to the loss, which stage 3 then bakes into the texture (docs/decisions.md)."""
     hidden: tuple[int, ...] = (16, 64, 64)
     """Hidden widths of f (the authors' 3->16->64->64->n)."""
     fourier_frequencies: int = 4
@@ -221,6 +225,8 @@ class Iterations:
     (the paper)."""
     convergence_window: int = 20
     """Steps per window of the early stops (window means smooth Adam's step-to-step noise)."""
+    shadow_refresh_every: int = 50
+    """Stage 2 refreshes the shadow transfer at most every this many steps (geometry moves slowly)."""
 
 
 @dataclass(frozen=True)
@@ -478,9 +484,11 @@ class FitConfig:
 RENAMED = {
     "shadows": "render.shadows",
     "shadow_rays": "render.shadow_rays",
-    "shadow_refresh_every": "render.shadow_refresh_every",
+    "shadow_refresh_every": "iterations.shadow_refresh_every",
+    "render.shadow_refresh_every": "iterations.shadow_refresh_every",
     "supersampling": "render.supersampling",
-    "render_blur": "render.render_blur",
+    "render_blur": "decouple.render_blur",
+    "render.render_blur": "decouple.render_blur",
 }
 """Settings that moved into a sub-config, old path -> new: ``override`` and ``from_dict`` still take the old
 paths (scripts, and the params.json of runs made before the move)."""
@@ -513,10 +521,22 @@ def from_dict(data: dict, cls: type = None) -> Any:
     cls = cls or FitConfig
     if not isinstance(data, dict):
         raise ValueError(f"a config must be a JSON object, got {type(data).__name__}")
-    moved = {old: data[old] for old in RENAMED if cls is FitConfig and old in data}
+    data, moved = _moved_settings(data) if cls is FitConfig else (data, {})
     base = _former_defaults() if cls is FitConfig else cls()
-    config = build(base, {key: value for key, value in data.items() if key not in moved})
-    return override(config, **moved)
+    return override(build(base, data), **moved)
+
+
+def _moved_settings(data: dict) -> tuple[dict, dict]:
+    """``data`` without the old paths of RENAMED (top-level or nested, e.g. ``{"render": {"render_blur": ..}}``),
+    and those settings by old path."""
+    data = {key: dict(value) if isinstance(value, dict) else value for key, value in data.items()}
+    moved = {}
+    for old in RENAMED:
+        *parent, name = old.split(".")
+        holder = data.get(parent[0]) if parent else data
+        if isinstance(holder, dict) and name in holder:
+            moved[old] = holder.pop(name)
+    return data, moved
 
 
 PAPER = {

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import torch
@@ -21,7 +22,7 @@ from deface.fit.log import FitLog
 from deface.fit.rendering import render_cast
 from deface.fit.scene import FrameGeometry, topology_tensors
 from deface.fit.stage3 import Stage3Result
-from deface.fit.state import FrameRender, StageContext
+from deface.fit.state import FrameRender, StageContext, fit_renderer
 from deface.io.images import srgb_to_linear
 from deface.models.base import FaceModel
 from deface.models.ita import texture_tone
@@ -135,7 +136,8 @@ class FitTexels:
 
 @dataclass(frozen=True)
 class FitOutput:
-    """A finished fit. ``render`` re-renders it with other textures, lights or a camera."""
+    """A finished fit, with its own renders (``renders``). ``render`` re-renders it with other textures, lights
+    or a camera."""
 
     model: FaceModel
     config: FitConfig  # the config the fit ran with
@@ -149,7 +151,13 @@ class FitOutput:
     framing: Framing  # where the working frames lie in the input's (crop, scale, principal point)
     kept_frames: list[int] | None  # positions of the fitted frames among the input's (None: all)
     record: RunRecord
-    renderer: Renderer  # the fit's renderer (its settings, bands and seed)
+    renders: tuple[FrameRender, ...]  # T: the fit's I_R, each frame under its kept lights with M_L and M_o,
+    # rendered once when the fit finishes (what the outputs write)
+
+    @cached_property
+    def renderer(self) -> Renderer:
+        """The fit's renderer: its render settings, the lights' bands and the seed."""
+        return fit_renderer(self.config)
 
     def skin_tone(self) -> dict:
         """The diffuse map's ITA and its interval over the white level's spread
@@ -182,9 +190,10 @@ class FitOutput:
         """The output of stages 2-3 (``stage3``: :class:`~deface.fit.stage3.Stage3Result`) and of the texture
         completion (``finished``)."""
         scene, target, config = context.scene, context.target, context.config
-        frames = []
+        frames, renders = [], []
         for frozen in stage3.frozen:
             rendered, _ = render_cast(context, frozen.index, frozen.cast, finished.textures, frozen.face_region)
+            renders.append(rendered)
             frames.append(OutputFrame(
                 frozen.geometry, frozen.cast, np.asarray(target.frames_srgb[frozen.index], dtype=np.float32),
                 context.inputs.face_classifier[frozen.index], rendered.light_masks.detach(),
@@ -201,7 +210,7 @@ class FitOutput:
             texels=FitTexels(stage3.initial, finished.seen, finished.confidence, tuple(stage3.views)),
             # as params.json records it (rounded), so a fit and its reload report the same tone interval
             illuminant=None if light is None else IlluminantEstimate.from_record(light.illuminant.record()),
-            framing=target.framing, kept_frames=target.kept_frames, record=record, renderer=context.renderer)
+            framing=target.framing, kept_frames=target.kept_frames, record=record, renders=tuple(renders))
 
     def export_vertices(self) -> np.ndarray:
         """[V, 3] cm: a photo's fitted mesh, or a clip's identity with a neutral expression."""

@@ -3,13 +3,12 @@
 The fit's frames share one size, one focal length and a principal point at their centre (deface/fit/scene.py), and
 a clip's frames share one crop (deface/fit/framing.py). Photos come from different cameras, sizes and distances, so
 each photo is cut to its own square around its face (``crop.margin`` x its landmarks' box, moved inside the photo
-where it fits, the photo's edge pixels repeated where it does not) and resized to one working side. Each crop is then treated as the frame of a
-camera looking at the face's centre: its principal point is the crop's centre, not the photo's. For a face near a
-wide photo's edge the true camera sees it a few degrees obliquely; the frame's own rotation takes that up, and the
-perspective (the shared focal length) differs by the few percent faces' depths allow. Shared across the photos:
-the identity's shape and every map; per photo: pose, expression, light masks, face region (and the white level the
-scene-light terms read off each crop).
-"""
+where it fits, the photo's edge pixels repeated where it does not) and resized to one working side. Each crop is
+then treated as the frame of a camera looking at the face's centre: its principal point is the crop's centre, not
+the photo's. For a face near a wide photo's edge the true camera sees it a few degrees obliquely; the frame's own
+rotation takes that up, and the perspective (the shared focal length) differs by the few percent faces' depths
+allow. Shared across the photos: the identity's shape and every map; per photo: pose, expression, light masks, face
+region (and the white level the scene-light terms read off each crop)."""
 
 from __future__ import annotations
 

@@ -11,7 +11,6 @@ report consume.
 
 from __future__ import annotations
 
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,7 +38,7 @@ from deface.landmarks.correspondence import correspondence_for
 from deface.landmarks.detect import NoFaceError, detect_landmarks, track_video
 from deface.models.registry import load_face_model
 from deface.priors.human import load_human_prior
-from deface.runtime import keep_freed_memory
+from deface.runtime import keep_freed_memory, torch_threads
 
 
 @dataclass(frozen=True)
@@ -155,18 +154,6 @@ def stage2_context(context: StageContext) -> StageContext:
         context.log.info(f"stage 2 at {'x'.join(map(str, level.target.size))} pixels (stage2_resolution {limit}), "
                          f"stage 3 at {'x'.join(map(str, context.target.size))}")
     return level
-
-
-@contextmanager
-def torch_threads(count: int):
-    """Run with ``count`` torch threads (0: leave torch's default), restoring the previous setting."""
-    previous = torch.get_num_threads()
-    if count > 0:
-        torch.set_num_threads(count)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)
 
 
 def _run_stages(target: FitTarget, config: FitConfig, models_dir, log: FitLog) -> FitState:

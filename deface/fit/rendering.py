@@ -76,7 +76,7 @@ def photometric(context: StageContext, frame: int, rendered: FrameRender) -> tor
     """L_pho of a frame's render against its photo, over M_o."""
     config = context.config
     return photometric_loss(rendered.face, context.target.images[frame], rendered.face_region, rendered.coverage,
-                            blur=config.render.render_blur, form=config.decouple.loss_form,
+                            blur=config.decouple.render_blur, form=config.decouple.loss_form,
                             clipped=context.target.clipped[frame] if config.decouple.clipped_as_bound else None)
 
 

@@ -47,7 +47,7 @@ def run_stage2(context: StageContext) -> Stage2Result:
         if step == ace_at and decoupling.light_field is not None:
             _apply_ace(level)
         optimiser.zero_grad(set_to_none=True)
-        refresh = step % config.render.shadow_refresh_every == 0
+        refresh = step % config.iterations.shadow_refresh_every == 0
         terms = LossTerms()
         loss = objective(level, before_ace=step < ace_at, refresh_shadows=refresh, terms=terms)
         loss.backward()

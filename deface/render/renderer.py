@@ -35,16 +35,14 @@ from deface.render.shadow import ShadowTransfer, compute_shadow_transfer
 @dataclass(frozen=True)
 class RenderConfig:
     """How frames are rendered: the one render config of the project (the fit's ``config.render``). The
-    renderer reads the shading and shadow fields, :func:`deface.render.frame.cast_frame` the supersampling,
-    and the fit the two fields marked "fit". The lights' bands and the shadow rays' seed are the run's, given
-    to :class:`Renderer` beside it."""
+    renderer reads the shading and shadow fields, :func:`deface.render.frame.cast_frame` the supersampling.
+    The lights' bands and the shadow rays' seed are the run's, given to :class:`Renderer` beside it; how often
+    a fit refreshes the shadows and how its loss compares renders are the fit's (``iterations``, ``decouple``)."""
 
     shadows: bool = True
     """Ray-traced self-shadowing (deface/render/shadow.py); off: nothing is occluded."""
     shadow_rays: int = 128
     """Shadow rays per vertex S for one transfer refresh (cost ~ V x S Embree any-hit queries)."""
-    shadow_refresh_every: int = 50
-    """Fit: stage 2 refreshes the shadow transfer at most this often (geometry moves slowly)."""
     shadow_tolerance_cm: float = 0.05
     """A refresh (:class:`ShadowTransferCache`) recomputes the transfer only when some vertex moved more than
     this (cm) since the last one."""
@@ -62,10 +60,6 @@ class RenderConfig:
     authors' renderer (NextFace) clamps the environment map it renders the SH through. Off: the SH as it is, whose
     negative lobes let a light subtract radiance (a fitted light darkened a chin through its specular reflection
     to explain a beard)."""
-    render_blur: bool = False
-    """Fit: L_pho compares a 3x3-Gaussian-blurred render with the photo, as the authors' code does (it smoothed
-    their path tracer's noise). Off: our render has no noise, and the blur leaves a pixel-scale checkerboard
-    almost invisible to the loss, which stage 3 then bakes into the texture (BENCHMARKS.md)."""
 
 
 @dataclass(frozen=True)
