@@ -560,6 +560,7 @@ PAPER = {
     "texture_pyramid.levels": 1,
     "completion.enabled": False,
     "chroma.enabled": False,
+    "skin_classifier.occluders.enabled": False,
     "skin_classifier.beard_zone": False,
     "skin_classifier.hull_margin": 0.0,
     "shading_evidence.strength": 0.0,

@@ -24,7 +24,8 @@ are not available offline. The default here, :class:`SkinColourClassifier`, need
 Limits: colour only. Hair, beards, hats or hands whose chroma is close to skin (blond or auburn hair, skin
 coloured fabric) are kept as face; very dark regions (deep shadow next to black hair) are judged from their
 surroundings; strongly coloured light (a red lamp on half the face) shifts chroma beyond the skin model; the
-region never extends beyond the coverage. Glasses are removed only where their frames/lenses change chroma.
+region never extends beyond the coverage. Thin dark structures (glasses frames, strands of hair) and tinted lenses
+are found by their shape (deface/priors/occluders.py) and left out.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from deface.io.images import LUMINANCE
+from deface.priors.occluders import OccluderConfig, find_occluders
 
 # Feature landmark groups (indices into MediaPipe's 468/478-point face mesh, from its connection lists).
 MEDIAPIPE_FEATURES = {
@@ -103,6 +105,10 @@ class SkinClassifierConfig:
     """Non-skin patches enclosed by skin, each up to this share of the face region, are face: moles, freckles,
     a birthmark, a moustache or goatee, make-up. They lie on the face's surface (face parsers label them skin),
     while what occludes the face (hair, a hand, a hat, glasses' arms) reaches in from its border."""
+    occluders: OccluderConfig = OccluderConfig()
+    """Thin, long, dark structures (a glasses frame, a strand of hair, a thin stripe of shade) and the tinted lenses
+    a frame encloses are left out, enclosed by skin or not (deface/priors/occluders.py). MediaPipe landmarks
+    only."""
 
 
 def _as_numpy(array, dtype=np.float32) -> np.ndarray:
@@ -252,6 +258,7 @@ class SkinColourClassifier:
             feature |= _as_numpy(features) > 0.5
         feature &= region
         beard = beard_zone_mask(points, shape) & region if cfg.beard_zone and points is not None else None
+        mediapipe = points is not None and points.shape[0] in (468, 478)
 
         linear = srgb**2.2
         luma = linear @ LUMINANCE.astype(np.float32)
@@ -271,6 +278,7 @@ class SkinColourClassifier:
         distance[partly] = clipped_chroma_distance(linear[partly], clipped[partly], mean, precision)
         reliable |= partly
         skin = 1.0 / (1.0 + np.exp((distance - cfg.threshold) / cfg.softness))
+        occluders = self._occluders(srgb, region, points, diagonal) if cfg.occluders.enabled and mediapipe else None
 
         size = max(3, int(round(cfg.smoothing * diagonal)) | 1)
         skin = np.where(region, skin, 0.0).astype(np.float32)
@@ -286,8 +294,22 @@ class SkinColourClassifier:
         cleaned = cv2.morphologyEx(cv2.morphologyEx(binary, cv2.MORPH_CLOSE, kernel), cv2.MORPH_OPEN, kernel)
         # keep the soft values where the cleaning agreed, the cleaned decision elsewhere
         skin = np.where(cleaned.astype(bool) == binary.astype(bool), skin, cleaned.astype(np.float32))
+        if occluders is not None:  # after the cleaning, whose closing would fill a thin frame back in
+            skin = np.where(occluders, 0.0, skin)
         skin = cv2.GaussianBlur(skin.astype(np.float32), (0, 0), sigmaX=max(0.5, size / 3))
         return np.clip(np.where(region, skin, 0.0), 0.0, 1.0).astype(np.float32)
+
+
+    def _occluders(self, srgb: np.ndarray, region: np.ndarray, points: np.ndarray, diagonal: float) -> np.ndarray:
+        """[H, W] bool: what covers the face (deface/priors/occluders.py), grown by a pixel over its soft edge."""
+        config = self.config.occluders
+        shape = region.shape
+        kept = feature_mask_from_landmarks(points, shape, round(config.feature_margin * diagonal))
+        kept |= beard_zone_mask(points, shape) if self.config.beard_zone else False
+        eyes = _hull_mask(points[list(MEDIAPIPE_FEATURES["left_eye"])], shape)
+        eyes |= _hull_mask(points[list(MEDIAPIPE_FEATURES["right_eye"])], shape)
+        found = find_occluders(srgb, region, kept, eyes, diagonal, config)
+        return cv2.dilate(found.astype(np.uint8), _disk(1)).astype(bool) if found.any() else found
 
 
 def load_face_region_classifier(

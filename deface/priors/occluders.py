@@ -1,0 +1,131 @@
+"""What covers the face, found without weights: thin, long, dark structures (a glasses frame, a strand of hair)
+and the tinted lenses a frame encloses, so that the face region h leaves them out
+(``SkinClassifierConfig.occluders``).
+
+A glasses frame or a strand of hair is a curve a few pixels wide, much darker than the skin on both of its sides,
+running a long way across the face. Pigment on the face's surface is not like that: moles, freckles and a
+birthmark are compact; brows, lashes and lips are the landmarks' features; a beard grows in the beard zone. So:
+
+1. darkness: how much darker a pixel's log luminance is than the grey-level closing of it by a disk of radius
+   r = ``width`` x the face's diagonal, i.e. than the brightest level around it on all sides within r (a
+   black-top-hat: zero on anything wider than about 2r, such as a cast shadow's body or the face's shading);
+2. candidates: darkness above log(1 / ``contrast``), grown over the pixels within 2 of them above
+   log(1 / ``edge_contrast``) (a frame's soft sides, not the shading beside it), outside the features (brows,
+   eyes, nostrils, lips, grown by ``feature_margin``) and the beard zone;
+3. structures: the candidates' connected parts whose skeleton is at least ``length`` x the diagonal long and
+   whose mean width (area over skeleton length) is at most ``thickness`` x the diagonal;
+4. lenses: the areas the structures enclose (a frame's rims around the eyes); a lens whose skin (outside the
+   eye) is darker than the skin around the frame by more than ``lens_contrast``, or of another chroma, is tinted
+   and left out whole; a clear lens shows the skin and stays.
+
+A thin cast shadow (a stripe of shade, a twig's or a strand's shadow) is found too: one photo cannot tell it
+from a dark strand by its shape, and its chroma is the skin's only under a light of the skin's colour (under a
+warm key and a cool fill it is not). It leaves h with the occluders, which is what the fit is for anyway: its
+texels are filled from the other photos, the face's other side or the skin around, instead of carrying the
+shadow. Measured on the board's thin stripes of shade (BENCHMARKS.md "occluders"), leaving them out is better
+than fitting them.
+
+Limits: a hand or fingers (wide, skin-coloured) are not found; nor a strand or a frame lighter than the skin;
+a frame's rim over a brow stays with the brow (features are never searched).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+from skimage.morphology import skeletonize
+
+
+@dataclass(frozen=True)
+class OccluderConfig:
+    """The offline occluder finder's knobs; sizes are shares of the face box's diagonal
+    (``SkinClassifierConfig.occluders``)."""
+
+    enabled: bool = True
+    """Leave thin dark structures and tinted lenses out of h (off: h is the skin model's alone)."""
+    width: float = 0.02
+    """Radius of the closing that measures darkness: structures up to about twice this wide are found."""
+    contrast: float = 0.55
+    """A pixel is a candidate when its luminance is at most this share of its surroundings' ..."""
+    edge_contrast: float = 0.8
+    """... and the candidate grows over connected pixels at most this share (the structure's soft sides)."""
+    length: float = 0.15
+    """Least length of a structure."""
+    thickness: float = 0.03
+    """Most mean width of a structure."""
+    feature_margin: float = 0.01
+    """Growth of the features' hulls that the search leaves alone."""
+    lens_contrast: float = 0.8
+    """A lens is tinted when its skin's luminance is under this share of the skin around the frame ..."""
+    lens_chroma: float = 0.025
+    """... or its chromaticity (r, g) differs from that skin's by more than this."""
+
+
+def _disk(radius: int) -> np.ndarray:
+    radius = max(1, int(radius))
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def darkness(luma: np.ndarray, radius: int) -> np.ndarray:
+    """[H, W] >= 0: log(closing(luma) / luma), the closing a disk of ``radius`` pixels (a black-top-hat in log
+    luminance: how much darker a pixel is than what surrounds it within the radius)."""
+    level = np.log(np.maximum(luma, 1e-4)).astype(np.float32)
+    return np.maximum(cv2.morphologyEx(level, cv2.MORPH_CLOSE, _disk(radius)) - level, 0.0)
+
+
+def thin_structures(mask: np.ndarray, least_length: float, most_width: float) -> np.ndarray:
+    """[H, W] bool: the connected parts of ``mask`` (8-connected) whose skeleton is at least ``least_length`` pixels
+    long and whose mean width (area over the skeleton's length) is at most ``most_width`` pixels."""
+    labels, count = ndimage.label(mask, structure=np.ones((3, 3)))
+    kept = np.zeros(count + 1, bool)
+    for index, piece in enumerate(ndimage.find_objects(labels), start=1):
+        inside = labels[piece] == index
+        length = float(skeletonize(inside).sum())
+        kept[index] = length >= max(least_length, 1.0) and inside.sum() / length <= most_width
+    return kept[labels]
+
+
+def tinted_lenses(structures: np.ndarray, srgb: np.ndarray, region: np.ndarray, eyes: np.ndarray,
+                  config: OccluderConfig, radius: int) -> np.ndarray:
+    """[H, W] bool: the areas ``structures`` enclose whose skin (not ``eyes``) is darker or of another chroma than
+    the skin just outside them (see the module doc)."""
+    enclosed = ndimage.binary_fill_holes(structures) & ~structures & region
+    labels, count = ndimage.label(enclosed)
+    lenses = np.zeros_like(enclosed)
+    linear = srgb.astype(np.float32) ** 2.2
+    luma = linear.mean(-1)
+    chroma = linear[..., :2] / np.maximum(linear.sum(-1, keepdims=True), 1e-6)
+    for index in range(1, count + 1):
+        lens = labels == index
+        grown = cv2.dilate((lens | structures).astype(np.uint8), _disk(2 * radius)).astype(bool)
+        around = grown & ~lens & ~structures & region & ~eyes
+        inside = lens & ~eyes
+        if inside.sum() < 10 or around.sum() < 10:
+            continue
+        ratio = np.median(luma[inside]) / max(np.median(luma[around]), 1e-6)
+        shift = np.linalg.norm(np.median(chroma[inside], 0) - np.median(chroma[around], 0))
+        lenses |= lens if ratio < config.lens_contrast or shift > config.lens_chroma else False
+    return lenses
+
+
+def find_occluders(srgb: np.ndarray, region: np.ndarray, kept: np.ndarray, eyes: np.ndarray, diagonal: float,
+                   config: OccluderConfig) -> np.ndarray:
+    """[H, W] bool: thin dark structures and tinted lenses over the face (the module doc).
+
+    ``srgb`` [H, W, 3] in [0, 1]; ``region`` [H, W] bool, where to look; ``kept`` [H, W] bool, the face's own
+    features and beard zone, never taken for an occluder; ``eyes`` [H, W] bool, the eyes (a lens's skin is
+    judged without them); ``diagonal``: the face box's, pixels."""
+    radius = max(2, round(config.width * diagonal))
+    luma = (srgb.astype(np.float32) ** 2.2) @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    dark = darkness(luma, radius)
+    search = region & ~kept
+    strong = search & (dark > np.log(1.0 / config.contrast))
+    weak = search & (dark > np.log(1.0 / config.edge_contrast))
+    grown = strong | (weak & cv2.dilate(strong.astype(np.uint8), _disk(2)).astype(bool))
+    structures = thin_structures(grown, config.length * diagonal, config.thickness * diagonal)
+    if not structures.any():
+        return structures
+    return structures | tinted_lenses(structures, srgb, region, eyes, config, radius)

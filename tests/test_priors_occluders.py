@@ -1,0 +1,95 @@
+"""The offline occluder finder (deface/priors/occluders.py) and what h does with it: a thin dark ring around the
+eyes and a strand over the forehead leave the face region (where they are not on a feature: a rim over a brow
+stays with the brow), a mole of the same darkness stays."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from deface.priors.face_region import (
+    MEDIAPIPE_FEATURES,
+    SkinClassifierConfig,
+    SkinColourClassifier,
+    _hull_mask,
+    feature_mask_from_landmarks,
+)
+from deface.priors.occluders import OccluderConfig, darkness, thin_structures
+
+
+def test_darkness_is_the_log_ratio_to_the_surroundings_on_thin_lines_only():
+    luma = np.full((60, 60), 0.5, np.float32)
+    luma[30:32, 5:55] = 0.15  # a line two pixels wide, 0.3 of its surroundings
+    luma[5:25, 5:25] = 0.15  # a patch wider than the closing's disk
+    dark = darkness(luma, radius=3)
+    assert dark[30:32, 10:50] == pytest.approx(np.log(1 / 0.3), rel=1e-4)
+    assert dark[8:22, 8:22].max() < 1e-5  # the closing does not reach across a wide patch's body
+    assert np.abs(dark[40:, :]).max() < 1e-6
+
+
+def test_thin_structures_keeps_long_thin_parts_by_their_skeleton():
+    mask = np.zeros((80, 80), bool)
+    mask[10:12, 5:75] = True  # a strand: 70 long, 2 wide
+    mask[40:46, 40:46] = True  # a mole: compact
+    mask[55:75, 5:15] = True  # a patch: 20 long but 10 wide
+    cv2.circle(ring := np.zeros((80, 80), np.uint8), (50, 62), 12, 1, 2)  # a rim: short across, long around
+    mask |= ring > 0
+    found = thin_structures(mask, least_length=30, most_width=4)
+    assert found[10:12, 5:75].all() and found[ring > 0].all()
+    assert not found[40:46, 40:46].any() and not found[55:75, 5:15].any()
+
+
+def _face(photos):
+    from deface.io.images import load_image
+    from deface.landmarks.detect import detect_landmarks
+
+    image = load_image(photos / "nextface-s1.png")
+    points = detect_landmarks(image).points[:, :2]
+    return image.copy(), points
+
+
+def _features(points, shape):
+    diagonal = float(np.hypot(*np.ptp(points, axis=0)))
+    return feature_mask_from_landmarks(points, shape, round(OccluderConfig().feature_margin * diagonal) + 2)
+
+
+def _h(image, points, enabled=True):
+    coverage = cv2.dilate(_hull_mask(points, image.shape[:2]).astype(np.uint8), np.ones((15, 15), np.uint8))
+    config = SkinClassifierConfig(occluders=OccluderConfig(enabled=enabled))
+    return SkinColourClassifier(config)(image, coverage.astype(np.float32), points)
+
+
+def test_a_thin_dark_ring_around_the_eyes_leaves_h_and_a_mole_as_dark_stays(photos):
+    image, points = _face(photos)
+    frame = np.zeros(image.shape[:2], np.uint8)
+    for name in ("left_eye", "right_eye"):
+        eye = points[list(MEDIAPIPE_FEATURES[name])]
+        centre, half = eye.mean(0), np.ptp(eye[:, 0]) / 2
+        cv2.ellipse(frame, (round(centre[0]), round(centre[1])), (round(1.8 * half), round(1.3 * half)), 0, 0, 360,
+                    1, 2)
+    cheek = points[205]  # MediaPipe's right cheek
+    mole = np.zeros_like(frame)
+    cv2.circle(mole, (round(cheek[0]), round(cheek[1])), 2, 1, -1)
+    dark = np.array([0.08, 0.08, 0.09], np.float32)  # a dark grey frame, and a mole as dark
+    image[frame > 0] = dark
+    image[mole > 0] = dark
+    h, without = _h(image, points), _h(image, points, enabled=False)
+    ring = frame > 0
+    assert without[ring].mean() > 0.6  # the skin model alone keeps the frame, enclosed by skin
+    off_features = ring & ~_features(points, image.shape[:2])  # a rim over a brow stays with the brow
+    assert off_features.sum() > 0.6 * ring.sum() and h[off_features].mean() < 0.2
+    assert h[mole > 0].mean() > 0.8
+
+
+def test_a_strand_over_the_forehead_leaves_h(photos):
+    image, points = _face(photos)
+    top, brow = points[10], points[9]  # the forehead's top and the point between the brows
+    strand = np.zeros(image.shape[:2], np.uint8)
+    curve = np.array([[top[0] - 25, top[1] + 4], [top[0] - 5, (top[1] + brow[1]) / 2],
+                      [top[0] + 20, brow[1] - 4]], np.int32)
+    cv2.polylines(strand, [curve], False, 1, 2)
+    image[strand > 0] = np.array([0.10, 0.07, 0.05], np.float32)  # dark brown hair
+    h = _h(image, points)
+    assert h[(strand > 0) & ~_features(points, image.shape[:2])].mean() < 0.2
+    assert (h[_hull_mask(points, image.shape[:2]) & (strand == 0)] > 0.5).mean() > 0.9  # the rest stays face
