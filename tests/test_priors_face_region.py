@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from deface.priors.bisenet import FACE_CLASSES, BiSeNet, BiSeNetFaceParser, MissingWeightsError, parsing_box
+from deface.priors.bisenet import (
+    CELEBAMASK_CLASSES,
+    FACE_CLASSES,
+    BiSeNet,
+    BiSeNetFaceParser,
+    MissingWeightsError,
+    parsing_box,
+)
 from deface.priors.face_region import (
     SkinClassifierConfig,
     SkinColourClassifier,
@@ -144,6 +151,35 @@ def test_bisenet_shapes_and_state_dict_round_trip(tmp_path):
     assert h.shape == (90, 70) and h.min() >= 0 and h.max() <= 1
     assert h[:top].max() == 0 and h[top:bottom, left:right].min() > 0
     assert len(FACE_CLASSES) == 9
+
+
+@pytest.fixture(scope="module")
+def parser_checkpoint(tmp_path_factory):
+    """A randomly initialised BiSeNet saved as the checkpoint's state dict."""
+    path = tmp_path_factory.mktemp("bisenet") / "79999_iter.pth"
+    torch.save(BiSeNet(19).state_dict(), path)
+    return path
+
+
+@pytest.mark.parametrize("label", range(19))
+def test_bisenet_classes_map_to_the_face_region_as_documented(parser_checkpoint, label):
+    """A parser loaded from a checkpoint in the project's format, its network's output set to one CelebAMask-HQ
+    class everywhere: h is 1 for the face's classes (skin, brows, eyes, nose, mouth, lips) and 0 for the rest
+    (background, eyeglasses, ears, earring, neck, necklace, cloth, hair, hat): what covers the face is not face."""
+    parser = BiSeNetFaceParser(parser_checkpoint, input_size=32)
+
+    def one_class(crop):
+        logits = torch.full((crop.shape[0], 19, *crop.shape[2:]), -20.0)
+        logits[:, label] = 20.0
+        return logits, logits, logits
+
+    parser.network = one_class
+    h = parser(np.full((40, 40, 3), 0.5, np.float32), None, np.array([[10.0, 10.0], [30.0, 30.0]]))
+    inside = h[h > 0] if label in FACE_CLASSES else h
+    face = CELEBAMASK_CLASSES[label] in ("skin", "l_brow", "r_brow", "l_eye", "r_eye", "nose", "mouth", "u_lip",
+                                         "l_lip")
+    assert face == (label in FACE_CLASSES)
+    assert (inside.min() > 0.99) if face else (h.max() < 1e-6)
 
 
 def test_bisenet_missing_checkpoint(tmp_path, monkeypatch):

@@ -1,7 +1,8 @@
 """BiSeNet face parser (zllrunning/face-parsing.PyTorch), written in plain torch with upstream's module names.
 
 ResNet-18 context path + feature fusion, 19 CelebAMask-HQ classes; the checkpoint ``79999_iter.pth`` loads
-with strict key matching. Face = classes {1 skin, 2/3 brows, 4/5 eyes, 10 nose, 11 mouth, 12/13 lips}.
+with strict key matching. Face = classes {1 skin, 2/3 brows, 4/5 eyes, 10 nose, 11 mouth, 12/13 lips}; not face:
+0 background, 6 eyeglasses, 7/8 ears, 9 earring, 14 neck, 15 necklace, 16 cloth, 17 hair, 18 hat.
 :class:`BiSeNetFaceParser` crops the image around the landmark box (1.1x wide, 1.25x tall), resizes the crop
 to 512^2, normalises it with ImageNet statistics, sums the softmax of the face classes and pastes the result
 back into the full frame. The checkpoint cannot be fetched at run time: place it in the models directory.
@@ -26,7 +27,14 @@ PARSER_SOURCE = (
     "the BiSeNet face-parsing checkpoint 79999_iter.pth of github.com/zllrunning/face-parsing.PyTorch "
     "(link in its README)"
 )
+CELEBAMASK_CLASSES = ("background", "skin", "l_brow", "r_brow", "l_eye", "r_eye", "eye_g", "l_ear", "r_ear", "ear_r",
+                      "nose", "mouth", "u_lip", "l_lip", "neck", "neck_l", "cloth", "hair", "hat")
+"""The checkpoint's 19 classes, in its output order (CelebAMask-HQ's labels; eye_g: eyeglasses, ear_r: earring,
+neck_l: necklace)."""
 FACE_CLASSES = (1, 2, 3, 4, 5, 10, 11, 12, 13)
+"""The classes h counts as face: the skin and the face's own features. Eyeglasses, hair, a hat, cloth, ears and
+jewellery, which cover the face or lie beside it, are not (the offline classifier's occluder finder looks for the
+same, deface/priors/occluders.py)."""
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 

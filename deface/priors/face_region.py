@@ -301,7 +301,7 @@ class SkinColourClassifier:
 
 
     def _occluders(self, srgb: np.ndarray, region: np.ndarray, points: np.ndarray, diagonal: float) -> np.ndarray:
-        """[H, W] bool: what covers the face (deface/priors/occluders.py), grown by a pixel over its soft edge."""
+        """[H, W] bool: what covers the face (deface/priors/occluders.py), grown by ``occluders.grow`` pixels."""
         config = self.config.occluders
         shape = region.shape
         kept = feature_mask_from_landmarks(points, shape, round(config.feature_margin * diagonal))
@@ -309,7 +309,9 @@ class SkinColourClassifier:
         eyes = _hull_mask(points[list(MEDIAPIPE_FEATURES["left_eye"])], shape)
         eyes |= _hull_mask(points[list(MEDIAPIPE_FEATURES["right_eye"])], shape)
         found = find_occluders(srgb, region, kept, eyes, diagonal, config)
-        return cv2.dilate(found.astype(np.uint8), _disk(1)).astype(bool) if found.any() else found
+        if not found.any() or config.grow < 1:
+            return found
+        return cv2.dilate(found.astype(np.uint8), _disk(config.grow)).astype(bool)
 
 
 def load_face_region_classifier(

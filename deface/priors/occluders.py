@@ -14,7 +14,9 @@ birthmark are compact; brows, lashes and lips are the landmarks' features; a bea
    eyes, nostrils, lips, grown by ``feature_margin``) and the beard zone;
 3. structures: the candidates' connected parts whose skeleton is at least ``length`` x the diagonal long and
    whose mean width (area over skeleton length) is at most ``thickness`` x the diagonal;
-4. lenses: the areas the structures enclose (a frame's rims around the eyes); a lens whose skin (outside the
+4. abstaining: structures over more than ``most_area`` of the region are the face's own texture (a dark skin's
+   deep wrinkles), and nothing is left out;
+5. lenses: the areas the structures enclose (a frame's rims around the eyes); a lens whose skin (outside the
    eye) is darker than the skin around the frame by more than ``lens_contrast``, or of another chroma, is tinted
    and left out whole; a clear lens shows the skin and stays.
 
@@ -56,6 +58,11 @@ class OccluderConfig:
     """Least length of a structure."""
     thickness: float = 0.03
     """Most mean width of a structure."""
+    most_area: float = 0.2
+    """When the structures cover more than this share of the region, they are the face's own texture at this
+    scale (deep wrinkles, rough skin, a dense pattern of shade), not what covers it: nothing is left out."""
+    grow: int = 1
+    """Pixels what was found grows by before it leaves h (its soft sides, a shadow's penumbra)."""
     feature_margin: float = 0.01
     """Growth of the features' hulls that the search leaves alone."""
     lens_contrast: float = 0.8
@@ -80,11 +87,12 @@ def thin_structures(mask: np.ndarray, least_length: float, most_width: float) ->
     """[H, W] bool: the connected parts of ``mask`` (8-connected) whose skeleton is at least ``least_length`` pixels
     long and whose mean width (area over the skeleton's length) is at most ``most_width`` pixels."""
     labels, count = ndimage.label(mask, structure=np.ones((3, 3)))
-    kept = np.zeros(count + 1, bool)
-    for index, piece in enumerate(ndimage.find_objects(labels), start=1):
-        inside = labels[piece] == index
-        length = float(skeletonize(inside).sum())
-        kept[index] = length >= max(least_length, 1.0) and inside.sum() / length <= most_width
+    if count == 0:
+        return mask.copy()
+    index = np.arange(1, count + 1)
+    length = ndimage.sum_labels(skeletonize(mask), labels, index)  # parts are apart: one skeleton serves all
+    area = ndimage.sum_labels(mask, labels, index)
+    kept = np.concatenate([[False], (length >= max(least_length, 1.0)) & (area <= most_width * length)])
     return kept[labels]
 
 
@@ -126,6 +134,6 @@ def find_occluders(srgb: np.ndarray, region: np.ndarray, kept: np.ndarray, eyes:
     weak = search & (dark > np.log(1.0 / config.edge_contrast))
     grown = strong | (weak & cv2.dilate(strong.astype(np.uint8), _disk(2)).astype(bool))
     structures = thin_structures(grown, config.length * diagonal, config.thickness * diagonal)
-    if not structures.any():
-        return structures
+    if not structures.any() or structures.sum() > config.most_area * region.sum():
+        return np.zeros_like(structures)
     return structures | tinted_lenses(structures, srgb, region, eyes, config, radius)
