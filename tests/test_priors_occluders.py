@@ -62,18 +62,11 @@ def _h(image, points, enabled=True):
 
 def test_a_thin_dark_ring_around_the_eyes_leaves_h_and_a_mole_as_dark_stays(photos):
     image, points = _face(photos)
-    frame = np.zeros(image.shape[:2], np.uint8)
-    for name in ("left_eye", "right_eye"):
-        eye = points[list(MEDIAPIPE_FEATURES[name])]
-        centre, half = eye.mean(0), np.ptp(eye[:, 0]) / 2
-        cv2.ellipse(frame, (round(centre[0]), round(centre[1])), (round(1.8 * half), round(1.3 * half)), 0, 0, 360,
-                    1, 2)
+    frame = _draw_frame(image, points)
     cheek = points[205]  # MediaPipe's right cheek
     mole = np.zeros_like(frame)
     cv2.circle(mole, (round(cheek[0]), round(cheek[1])), 2, 1, -1)
-    dark = np.array([0.08, 0.08, 0.09], np.float32)  # a dark grey frame, and a mole as dark
-    image[frame > 0] = dark
-    image[mole > 0] = dark
+    image[mole > 0] = np.array([0.08, 0.08, 0.09], np.float32)  # as dark as the frame
     h, without = _h(image, points), _h(image, points, enabled=False)
     ring = frame > 0
     assert without[ring].mean() > 0.6  # the skin model alone keeps the frame, enclosed by skin
@@ -93,3 +86,75 @@ def test_a_strand_over_the_forehead_leaves_h(photos):
     h = _h(image, points)
     assert h[(strand > 0) & ~_features(points, image.shape[:2])].mean() < 0.2
     assert (h[_hull_mask(points, image.shape[:2]) & (strand == 0)] > 0.5).mean() > 0.9  # the rest stays face
+
+
+def test_the_finder_abstains_when_thin_dark_lines_cover_the_face():
+    """Deep wrinkles over a whole dark face are its own texture: past ``most_area`` of the region nothing is
+    left out, while one line of the same kind is."""
+    from deface.priors.occluders import find_occluders
+
+    size = 120
+    region = np.zeros((size, size), bool)
+    region[10:110, 10:110] = True
+    none = np.zeros_like(region)
+    one = np.full((size, size, 3), 0.6, np.float32)
+    one[60:62, 15:105] = 0.1
+    net = one.copy()
+    net[12:108:6, 12:108] = 0.1  # a line every 6 rows and columns: a third of the face
+    net[12:108, 12:108:6] = 0.1
+    config = OccluderConfig()
+    found = find_occluders(one, region, none, none, 100.0, config)
+    assert found[60:62, 20:100].all() and found.sum() < 0.05 * region.sum()
+    assert not find_occluders(net, region, none, none, 100.0, config).any()
+    assert find_occluders(net, region, none, none, 100.0, OccluderConfig(most_area=1.0)).sum() > 0.2 * region.sum()
+
+
+def _draw_frame(image, points):
+    """A dark grey glasses frame, 2 pixels wide, around both eyes: [H, W] uint8, 1 on the frame."""
+    frame = np.zeros(image.shape[:2], np.uint8)
+    for name in ("left_eye", "right_eye"):
+        eye = points[list(MEDIAPIPE_FEATURES[name])]
+        centre, half = eye.mean(0), np.ptp(eye[:, 0]) / 2
+        cv2.ellipse(frame, (round(centre[0]), round(centre[1])), (round(1.8 * half), round(1.3 * half)), 0, 0, 360,
+                    1, 2)
+    image[frame > 0] = np.array([0.08, 0.08, 0.09], np.float32)
+    return frame
+
+
+def _texels_on(view, mask: np.ndarray) -> np.ndarray:
+    """[Ht, Wt] bool: the visible texels whose pixel lies on ``mask`` [H, W]."""
+    pixel = np.floor(view.pixel).astype(int)
+    inside = view.visible & (pixel[..., 0] >= 0) & (pixel[..., 1] >= 0)
+    inside &= (pixel[..., 0] < mask.shape[1]) & (pixel[..., 1] < mask.shape[0])
+    on = np.zeros(inside.shape, bool)
+    on[inside] = mask[pixel[..., 1][inside], pixel[..., 0][inside]] > 0
+    return on
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("enabled", [True, False])
+def test_a_frame_is_not_in_the_map_its_texels_are_filled_and_marked_low(photos, enabled):
+    """A fit of a photo with a dark frame drawn around the eyes: off the features, the frame's texels are nearly
+    as light as the skin around them in diffuse.png (the photo there is a fifth as light), and their confidence
+    is under half of the skin's. Without the occluder finder (the reference) the frame is painted in."""
+    from deface.fit import presets
+    from deface.fit.config import override
+    from deface.fit.pipeline import fit
+
+    image, points = _face(photos)
+    frame = _draw_frame(image, points) * ~_features(points, image.shape[:2])
+    config = override(presets.get("default"), **{"iterations.stage1": 60, "iterations.stage2": 60,
+                                                 "iterations.stage3": 60,
+                                                 "skin_classifier.occluders.enabled": enabled})
+    result = fit([image], config, source="frame")
+    assert result.framing.is_whole  # working pixels are the photo's
+    view = result.texels.views[0]
+    on_frame = _texels_on(view, frame)
+    around = _texels_on(view, cv2.dilate(frame, np.ones((9, 9), np.uint8)))
+    around &= ~_texels_on(view, cv2.dilate(frame, np.ones((3, 3), np.uint8))) & (result.texels.seen > 0.5)
+    luma = result.textures.diffuse.numpy() @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    confidence = result.texels.confidence
+    assert on_frame.sum() > 20 and around.sum() > 50
+    clean = luma[on_frame].mean() > 0.85 * luma[around].mean()
+    low = np.median(confidence[on_frame]) < 0.5 * np.median(confidence[around])
+    assert (clean and low) if enabled else not (clean or low)
