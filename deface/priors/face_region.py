@@ -297,6 +297,8 @@ class SkinColourClassifier:
         if occluders is not None:  # after the cleaning, whose closing would fill a thin frame back in
             skin = np.where(occluders, 0.0, skin)
         skin = cv2.GaussianBlur(skin.astype(np.float32), (0, 0), sigmaX=max(0.5, size / 3))
+        if occluders is not None:  # and after the blur: a frame's pixels at half weight painted a trace of it
+            skin = np.where(occluders, 0.0, skin)
         return np.clip(np.where(region, skin, 0.0), 0.0, 1.0).astype(np.float32)
 
 
