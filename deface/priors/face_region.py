@@ -39,7 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from deface.io.images import LUMINANCE
-from deface.priors.occluders import OccluderConfig, find_occluders
+from deface.priors.occluders import OccluderConfig, disk, find_occluders
 
 # Feature landmark groups (indices into MediaPipe's 468/478-point face mesh, from its connection lists).
 MEDIAPIPE_FEATURES = {
@@ -125,11 +125,6 @@ def _hull_mask(points: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return mask.astype(bool)
 
 
-def _disk(radius: int) -> np.ndarray:
-    radius = max(1, int(radius))
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-
-
 def beard_zone_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """[H, W] bool: the convex hull of the face outline's points below the nose's base and the base itself
     (MediaPipe 468/478 layout; empty for others)."""
@@ -149,7 +144,7 @@ def feature_mask_from_landmarks(landmarks: np.ndarray, shape: tuple[int, int], d
     for indices in groups.values():
         mask |= _hull_mask(landmarks[list(indices)], shape)
     if mask.any() and dilation > 0:
-        mask = cv2.dilate(mask.astype(np.uint8), _disk(dilation)).astype(bool)
+        mask = cv2.dilate(mask.astype(np.uint8), disk(dilation)).astype(bool)
     return mask
 
 
@@ -245,7 +240,7 @@ class SkinColourClassifier:
         if points is not None and points.shape[0] >= 3:
             hull = _hull_mask(points, shape)
             margin = cfg.hull_margin * float(np.hypot(*np.ptp(points, axis=0))) if cfg.hull_margin > 0 else 2
-            region &= cv2.dilate(hull.astype(np.uint8), _disk(round(margin))).astype(bool)
+            region &= cv2.dilate(hull.astype(np.uint8), disk(round(margin))).astype(bool)
         if region.sum() < 20:
             raise ValueError("the face region (coverage, landmarks) holds fewer than 20 pixels")
         ys, xs = np.nonzero(region)
@@ -264,7 +259,7 @@ class SkinColourClassifier:
         luma = linear @ LUMINANCE.astype(np.float32)
         clipped = srgb >= cfg.bright_value  # [H, W, 3]
         reliable = (luma > cfg.dark_luma) & ~clipped.any(axis=-1)
-        core = cv2.erode((region & ~feature).astype(np.uint8), _disk(round(cfg.core_erosion * diagonal)))
+        core = cv2.erode((region & ~feature).astype(np.uint8), disk(round(cfg.core_erosion * diagonal)))
         core = core.astype(bool) & reliable
         if core.sum() < 20:  # tiny faces: fall back on the whole region
             core = region & reliable & ~feature
@@ -290,7 +285,7 @@ class SkinColourClassifier:
         if beard is not None:
             skin = np.maximum(skin, beard.astype(np.float32))
         binary = (skin > 0.5).astype(np.uint8)
-        kernel = _disk(size // 2)
+        kernel = disk(size // 2)
         cleaned = cv2.morphologyEx(cv2.morphologyEx(binary, cv2.MORPH_CLOSE, kernel), cv2.MORPH_OPEN, kernel)
         # keep the soft values where the cleaning agreed, the cleaned decision elsewhere
         skin = np.where(cleaned.astype(bool) == binary.astype(bool), skin, cleaned.astype(np.float32))
@@ -313,7 +308,7 @@ class SkinColourClassifier:
         found = find_occluders(srgb, region, kept, eyes, diagonal, config)
         if not found.any() or config.grow < 1:
             return found
-        return cv2.dilate(found.astype(np.uint8), _disk(config.grow)).astype(bool)
+        return cv2.dilate(found.astype(np.uint8), disk(config.grow)).astype(bool)
 
 
 def load_face_region_classifier(

@@ -40,6 +40,8 @@ import numpy as np
 from scipy import ndimage
 from skimage.morphology import skeletonize
 
+from deface.io.images import LUMINANCE
+
 
 @dataclass(frozen=True)
 class OccluderConfig:
@@ -71,7 +73,8 @@ class OccluderConfig:
     """... or its chromaticity (r, g) differs from that skin's by more than this."""
 
 
-def _disk(radius: int) -> np.ndarray:
+def disk(radius: int) -> np.ndarray:
+    """A disk-shaped structuring element of ``radius`` pixels (at least 1)."""
     radius = max(1, int(radius))
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
@@ -80,7 +83,7 @@ def darkness(luma: np.ndarray, radius: int) -> np.ndarray:
     """[H, W] >= 0: log(closing(luma) / luma), the closing a disk of ``radius`` pixels (a black-top-hat in log
     luminance: how much darker a pixel is than what surrounds it within the radius)."""
     level = np.log(np.maximum(luma, 1e-4)).astype(np.float32)
-    return np.maximum(cv2.morphologyEx(level, cv2.MORPH_CLOSE, _disk(radius)) - level, 0.0)
+    return np.maximum(cv2.morphologyEx(level, cv2.MORPH_CLOSE, disk(radius)) - level, 0.0)
 
 
 def thin_structures(mask: np.ndarray, least_length: float, most_width: float) -> np.ndarray:
@@ -103,12 +106,14 @@ def tinted_lenses(structures: np.ndarray, srgb: np.ndarray, region: np.ndarray, 
     enclosed = ndimage.binary_fill_holes(structures) & ~structures & region
     labels, count = ndimage.label(enclosed)
     lenses = np.zeros_like(enclosed)
+    reach = disk(2 * radius)
+    near_structures = cv2.dilate(structures.astype(np.uint8), reach).astype(bool)
     linear = srgb.astype(np.float32) ** 2.2
     luma = linear.mean(-1)
     chroma = linear[..., :2] / np.maximum(linear.sum(-1, keepdims=True), 1e-6)
     for index in range(1, count + 1):
         lens = labels == index
-        grown = cv2.dilate((lens | structures).astype(np.uint8), _disk(2 * radius)).astype(bool)
+        grown = near_structures | cv2.dilate(lens.astype(np.uint8), reach).astype(bool)
         around = grown & ~lens & ~structures & region & ~eyes
         inside = lens & ~eyes
         if inside.sum() < 10 or around.sum() < 10:
@@ -127,12 +132,12 @@ def find_occluders(srgb: np.ndarray, region: np.ndarray, kept: np.ndarray, eyes:
     features and beard zone, never taken for an occluder; ``eyes`` [H, W] bool, the eyes (a lens's skin is
     judged without them); ``diagonal``: the face box's, pixels."""
     radius = max(2, round(config.width * diagonal))
-    luma = (srgb.astype(np.float32) ** 2.2) @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    luma = (srgb.astype(np.float32) ** 2.2) @ LUMINANCE.astype(np.float32)
     dark = darkness(luma, radius)
     search = region & ~kept
     strong = search & (dark > np.log(1.0 / config.contrast))
     weak = search & (dark > np.log(1.0 / config.edge_contrast))
-    grown = strong | (weak & cv2.dilate(strong.astype(np.uint8), _disk(2)).astype(bool))
+    grown = strong | (weak & cv2.dilate(strong.astype(np.uint8), disk(2)).astype(bool))
     structures = thin_structures(grown, config.length * diagonal, config.thickness * diagonal)
     if not structures.any() or structures.sum() > config.most_area * region.sum():
         return np.zeros_like(structures)
