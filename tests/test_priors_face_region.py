@@ -230,3 +230,18 @@ def test_beard_zone_is_the_lower_face_below_the_nose(photos):
     assert not zone[int(nose_tip[1]) - 3, int(nose_tip[0])]  # the nose is above the zone
     assert not zone[int(forehead[1]) + 3, int(forehead[0])]
     assert not beard_zone_mask(points[:68], image.shape[:2]).any()  # not a MediaPipe layout: no zone
+
+
+@pytest.mark.parametrize("mouth_opening", [True, False])
+def test_bisenet_leaves_the_mouths_opening_out_as_the_skin_classifier_does(parser_checkpoint, tmp_path, monkeypatch,
+                                                                           mouth_opening):
+    from deface.priors.bisenet import MOUTH_CLASS, PARSER_RELATIVE
+
+    target = tmp_path / PARSER_RELATIVE[0]
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_bytes(parser_checkpoint.read_bytes())
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    parser, description = load_face_region_classifier(tmp_path, skin=SkinClassifierConfig(mouth_opening=mouth_opening))
+    assert isinstance(parser, BiSeNetFaceParser) and "BiSeNet" in description
+    assert (MOUTH_CLASS in parser.face_classes) != mouth_opening
+    assert set(parser.face_classes) | {MOUTH_CLASS} == set(FACE_CLASSES)

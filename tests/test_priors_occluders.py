@@ -159,3 +159,25 @@ def test_a_frame_is_not_in_the_map_its_texels_are_filled_and_marked_low(photos, 
     clean = luma[on_frame].mean() > 0.85 * luma[around].mean()
     low = np.median(confidence[on_frame]) < 0.5 * np.median(confidence[around])
     assert (clean and low) if enabled else not (clean or low)
+
+
+def test_the_mouths_opening_leaves_h_and_the_lips_stay(photos):
+    """A smile showing teeth: the opening between the inner lips is not the face's surface (h 0 there), the lips
+    around it are face; with ``mouth_opening`` off the lips' hull keeps the teeth as face."""
+    from deface.io.images import load_image
+    from deface.landmarks.detect import detect_landmarks
+    from deface.priors.face_region import mouth_opening_mask
+
+    image = load_image(photos / "nextface-s3.png")
+    points = detect_landmarks(image).points[:, :2]
+    shape = image.shape[:2]
+    opening = mouth_opening_mask(points, shape)
+    lips = _hull_mask(points[list(MEDIAPIPE_FEATURES["lips"])], shape)
+    band = lips & ~cv2.dilate(opening.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
+    assert opening.sum() > 0.1 * lips.sum()  # the photo's mouth is open
+    coverage = cv2.dilate(_hull_mask(points, shape).astype(np.uint8), np.ones((15, 15), np.uint8))
+    h = SkinColourClassifier()(image, coverage.astype(np.float32), points)
+    kept = SkinColourClassifier(SkinClassifierConfig(mouth_opening=False))(image, coverage.astype(np.float32), points)
+    assert h[opening].max() == 0.0 and kept[opening].mean() > 0.9
+    assert h[band].mean() > 0.9
+    assert not mouth_opening_mask(points[:68], shape).any()  # not a MediaPipe layout

@@ -561,6 +561,7 @@ PAPER = {
     "completion.enabled": False,
     "chroma.enabled": False,
     "skin_classifier.occluders.enabled": False,
+    "skin_classifier.mouth_opening": False,
     "skin_classifier.beard_zone": False,
     "skin_classifier.hull_margin": 0.0,
     "shading_evidence.strength": 0.0,

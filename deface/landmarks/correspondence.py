@@ -53,6 +53,7 @@ import torch
 from deface.models.base import FaceModel
 from deface.models.landmark_names import MIN_NAMED_ANCHORS, named_anchor_ids
 from deface.paths import ModelFileError, find_model_file, user_cache_dir
+from deface.priors.face_region import MEDIAPIPE_INNER_LIPS
 
 CANONICAL_MESH = "mediapipe-canonical/face_model_with_iris.obj"
 ALGORITHM_VERSION = "2"  # bump to invalidate cached correspondences when the construction changes
@@ -171,9 +172,7 @@ def face_oval_ids() -> np.ndarray:
 
 
 # The inner lip contour, mouth corners excluded (they are on the outer contour too: 61, 291 are kept).
-INNER_LIP_IDS = np.array(
-    [78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308, 324, 318, 402, 317, 14, 87, 178, 88, 95]
-)
+INNER_LIP_IDS = np.array(MEDIAPIPE_INNER_LIPS)
 
 
 def inner_lip_ids() -> np.ndarray:

@@ -35,6 +35,9 @@ FACE_CLASSES = (1, 2, 3, 4, 5, 10, 11, 12, 13)
 """The classes h counts as face: the skin and the face's own features. Eyeglasses, hair, a hat, cloth, ears and
 jewellery, which cover the face or lie beside it, are not (the offline classifier's occluder finder looks for the
 same, deface/priors/occluders.py)."""
+MOUTH_CLASS = 11
+"""The mouth's opening (teeth, tongue, between the inner lips), left out of h with
+``SkinClassifierConfig.mouth_opening`` (the default; the paper counts it as face)."""
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 
@@ -188,7 +191,7 @@ def parsing_box(points: np.ndarray, image_shape: tuple[int, int]) -> tuple[int, 
 class BiSeNetFaceParser:
     """h from BiSeNet: image [H, W, 3] sRGB in [0, 1] -> face probability [H, W] (a FaceRegionClassifier)."""
 
-    def __init__(self, checkpoint: str | os.PathLike, input_size: int = 512):
+    def __init__(self, checkpoint: str | os.PathLike, input_size: int = 512, face_classes=FACE_CLASSES):
         path = Path(checkpoint)
         if not path.is_file():
             raise MissingWeightsError(f"face-parsing checkpoint not found at {path}: get {PARSER_SOURCE}")
@@ -196,13 +199,15 @@ class BiSeNetFaceParser:
         self.network.load_state_dict(torch.load(path, map_location="cpu", weights_only=True), strict=True)
         self.network.eval()
         self.input_size = input_size
+        self.face_classes = tuple(face_classes)
 
     @classmethod
-    def from_models_dir(cls, models_dir: str | os.PathLike | None = None) -> BiSeNetFaceParser:
+    def from_models_dir(cls, models_dir: str | os.PathLike | None = None, face_classes=FACE_CLASSES
+                        ) -> BiSeNetFaceParser:
         for relative in PARSER_RELATIVE:
             found = find_model_file(relative, models_dir)
             if found is not None:
-                return cls(found)
+                return cls(found, face_classes=face_classes)
         raise MissingWeightsError(f"{PARSER_FILE} not found in the models directory: get {PARSER_SOURCE}")
 
     @torch.no_grad()
@@ -222,7 +227,7 @@ class BiSeNetFaceParser:
         crop = F.interpolate(crop, (self.input_size,) * 2, mode="bilinear", align_corners=False)
         crop = (crop - torch.tensor(IMAGENET_MEAN)[:, None, None]) / torch.tensor(IMAGENET_STD)[:, None, None]
         classes = torch.softmax(self.network(crop)[0], dim=1)  # [1, 19, S, S]
-        probabilities = classes[:, list(FACE_CLASSES)].sum(dim=1, keepdim=True)
+        probabilities = classes[:, list(self.face_classes)].sum(dim=1, keepdim=True)
         size = (bottom - top, right - left)
         pasted = F.interpolate(probabilities, size, mode="bilinear", align_corners=False)
         face = np.zeros(image.shape[:2], dtype=np.float32)

@@ -54,6 +54,8 @@ MEDIAPIPE_FEATURES = {
 MEDIAPIPE_FACE_OVAL = (10, 21, 54, 58, 67, 93, 103, 109, 127, 132, 136, 148, 149, 150, 152, 162, 172, 176, 234, 251,
                        284, 288, 297, 323, 332, 338, 356, 361, 365, 377, 378, 379, 389, 397, 400, 454)
 MEDIAPIPE_NOSE_BASE = (2, 98, 327)  # subnasale and the alae's bases: the beard zone's top
+MEDIAPIPE_INNER_LIPS = (78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308, 324, 318, 402, 317, 14, 87, 178, 88, 95)
+"""The inner lip contour in order around the mouth's opening (the corners 61 and 291 are on the outer one)."""
 IBUG68_FEATURES = {
     "left_brow": tuple(range(17, 22)),
     "right_brow": tuple(range(22, 27)),
@@ -105,6 +107,11 @@ class SkinClassifierConfig:
     """Non-skin patches enclosed by skin, each up to this share of the face region, are face: moles, freckles,
     a birthmark, a moustache or goatee, make-up. They lie on the face's surface (face parsers label them skin),
     while what occludes the face (hair, a hand, a hat, glasses' arms) reaches in from its border."""
+    mouth_opening: bool = True
+    """The opening between the inner lips (teeth, tongue, the mouth's dark inside) is not face: it is not the face's
+    surface, and a fit whose mouth is less open than the photo's would paint the teeth onto the lips' texels, which
+    completion fills instead. MediaPipe landmarks only; with BiSeNet, its mouth class leaves h. Off in ``paper``
+    (its parser counts the mouth as face)."""
     occluders: OccluderConfig = OccluderConfig()
     """Thin, long, dark structures (a glasses frame, a strand of hair, a thin stripe of shade) and the tinted lenses
     a frame encloses are left out, enclosed by skin or not (deface/priors/occluders.py). MediaPipe landmarks
@@ -134,6 +141,15 @@ def beard_zone_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray
     oval = landmarks[list(MEDIAPIPE_FACE_OVAL)]
     lower = oval[oval[:, 1] > base[:, 1].max()]
     return _hull_mask(np.concatenate([base, lower]), shape)
+
+
+def mouth_opening_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """[H, W] bool: the polygon of the inner lip contour, the mouth's opening (empty when the mouth is closed and
+    for layouts other than MediaPipe's 468/478)."""
+    mask = np.zeros(shape, np.uint8)
+    if landmarks.shape[0] in (468, 478):
+        cv2.fillPoly(mask, [np.round(landmarks[list(MEDIAPIPE_INNER_LIPS)]).astype(np.int32)], 1)
+    return mask.astype(bool)
 
 
 def feature_mask_from_landmarks(landmarks: np.ndarray, shape: tuple[int, int], dilation: int) -> np.ndarray:
@@ -274,6 +290,9 @@ class SkinColourClassifier:
         reliable |= partly
         skin = 1.0 / (1.0 + np.exp((distance - cfg.threshold) / cfg.softness))
         occluders = self._occluders(srgb, region, points, diagonal) if cfg.occluders.enabled and mediapipe else None
+        if cfg.mouth_opening and mediapipe:
+            mouth = cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(cfg.occluders.grow))
+            occluders = mouth.astype(bool) if occluders is None else occluders | mouth.astype(bool)
 
         size = max(3, int(round(cfg.smoothing * diagonal)) | 1)
         skin = np.where(region, skin, 0.0).astype(np.float32)
@@ -289,7 +308,7 @@ class SkinColourClassifier:
         cleaned = cv2.morphologyEx(cv2.morphologyEx(binary, cv2.MORPH_CLOSE, kernel), cv2.MORPH_OPEN, kernel)
         # keep the soft values where the cleaning agreed, the cleaned decision elsewhere
         skin = np.where(cleaned.astype(bool) == binary.astype(bool), skin, cleaned.astype(np.float32))
-        if occluders is not None:  # after the cleaning, whose closing would fill a thin frame back in
+        if occluders is not None:  # after the cleaning, whose closing would fill a thin frame or a mouth back in
             skin = np.where(occluders, 0.0, skin)
         skin = cv2.GaussianBlur(skin.astype(np.float32), (0, 0), sigmaX=max(0.5, size / 3))
         if occluders is not None:  # and after the blur: a frame's pixels at half weight painted a trace of it
@@ -318,10 +337,13 @@ def load_face_region_classifier(
     if prefer not in ("bisenet", "skin"):
         raise ValueError(f"unknown face-region classifier {prefer!r}; choose 'bisenet' or 'skin'")
     if prefer == "bisenet":
-        from deface.priors.bisenet import BiSeNetFaceParser, MissingWeightsError
+        from deface.priors.bisenet import FACE_CLASSES, MOUTH_CLASS, BiSeNetFaceParser, MissingWeightsError
 
+        mouth_out = (skin or SkinClassifierConfig()).mouth_opening
+        classes = tuple(c for c in FACE_CLASSES if not (mouth_out and c == MOUTH_CLASS))
         try:
-            return BiSeNetFaceParser.from_models_dir(models_dir), "BiSeNet face parsing (79999_iter.pth)"
+            return (BiSeNetFaceParser.from_models_dir(models_dir, face_classes=classes),
+                    "BiSeNet face parsing (79999_iter.pth)")
         except MissingWeightsError as error:
             return SkinColourClassifier(skin), f"skin-colour classifier (BiSeNet off: {error})"
     return SkinColourClassifier(skin), "skin-colour classifier"
