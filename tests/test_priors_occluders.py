@@ -181,3 +181,22 @@ def test_the_mouths_opening_leaves_h_and_the_lips_stay(photos):
     assert h[opening].max() == 0.0 and kept[opening].mean() > 0.9
     assert h[band].mean() > 0.9
     assert not mouth_opening_mask(points[:68], shape).any()  # not a MediaPipe layout
+
+
+def test_a_beards_edge_past_the_outline_is_not_taken_for_an_occluder(photos):
+    """nextface-s1's stubble runs past the face outline's points onto the jaw's underside: the finder leaves the
+    beard zone grown below the alae's line alone, so the dark band along the jaw stays face; nothing above that
+    line is added to the zone."""
+    from deface.priors.face_region import MEDIAPIPE_CHIN, beard_reach_mask, beard_zone_mask
+
+    image, points = _face(photos)
+    shape = image.shape[:2]
+    margin = 12
+    zone, reach = beard_zone_mask(points, shape), beard_reach_mask(points, shape, margin)
+    chin = np.round(points[MEDIAPIPE_CHIN]).astype(int)
+    assert (reach >= zone).all() and reach[chin[1] + margin // 2, chin[0]] and not zone[chin[1] + margin // 2, chin[0]]
+    nose = np.round(points[1]).astype(int)  # the nose's tip is above the alae's line
+    assert not reach[nose[1], nose[0]]
+    h, without = _h(image, points), _h(image, points, enabled=False)
+    band = reach & ~zone & (without > 0.5)
+    assert band.sum() > 100 and np.abs(h[band] - without[band]).mean() < 0.02  # the finder took nothing there

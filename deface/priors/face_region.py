@@ -54,6 +54,7 @@ MEDIAPIPE_FEATURES = {
 MEDIAPIPE_FACE_OVAL = (10, 21, 54, 58, 67, 93, 103, 109, 127, 132, 136, 148, 149, 150, 152, 162, 172, 176, 234, 251,
                        284, 288, 297, 323, 332, 338, 356, 361, 365, 377, 378, 379, 389, 397, 400, 454)
 MEDIAPIPE_NOSE_BASE = (2, 98, 327)  # subnasale and the alae's bases: the beard zone's top
+MEDIAPIPE_CHIN = 152
 MEDIAPIPE_INNER_LIPS = (78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308, 324, 318, 402, 317, 14, 87, 178, 88, 95)
 """The inner lip contour in order around the mouth's opening (the corners 61 and 291 are on the outer one)."""
 IBUG68_FEATURES = {
@@ -141,6 +142,21 @@ def beard_zone_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray
     oval = landmarks[list(MEDIAPIPE_FACE_OVAL)]
     lower = oval[oval[:, 1] > base[:, 1].max()]
     return _hull_mask(np.concatenate([base, lower]), shape)
+
+
+def beard_reach_mask(landmarks: np.ndarray, shape: tuple[int, int], margin: int) -> np.ndarray:
+    """[H, W] bool: the beard zone grown by ``margin`` pixels on the chin's side of the line through the alae's
+    bases (a beard grows past the face outline's points onto the jaw's underside; not up onto the cheeks)."""
+    zone = beard_zone_mask(landmarks, shape)
+    if not zone.any() or margin < 1:
+        return zone
+    grown = cv2.dilate(zone.astype(np.uint8), disk(margin)).astype(bool)
+    left, right = landmarks[MEDIAPIPE_NOSE_BASE[1]], landmarks[MEDIAPIPE_NOSE_BASE[2]]
+    normal = np.array([left[1] - right[1], right[0] - left[0]])  # perpendicular to the alae's line
+    normal *= np.sign(normal @ (landmarks[MEDIAPIPE_CHIN] - left)) or 1.0
+    ys, xs = np.mgrid[: shape[0], : shape[1]]
+    below = (xs - left[0]) * normal[0] + (ys - left[1]) * normal[1] >= 0
+    return zone | (grown & below)
 
 
 def mouth_opening_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -321,7 +337,8 @@ class SkinColourClassifier:
         config = self.config.occluders
         shape = region.shape
         kept = feature_mask_from_landmarks(points, shape, round(config.feature_margin * diagonal))
-        kept |= beard_zone_mask(points, shape) if self.config.beard_zone else False
+        if self.config.beard_zone:  # with the beard past the outline's points, as far as the region reaches
+            kept |= beard_reach_mask(points, shape, round(self.config.hull_margin * diagonal))
         eyes = _hull_mask(points[list(MEDIAPIPE_FEATURES["left_eye"])], shape)
         eyes |= _hull_mask(points[list(MEDIAPIPE_FEATURES["right_eye"])], shape)
         found = find_occluders(srgb, region, kept, eyes, diagonal, config)
