@@ -89,30 +89,3 @@ def test_mirror_fill_moves_towards_the_better_seen_side():
     filled, new_trust = mirror_fill(texture, trust)
     np.testing.assert_allclose(filled[..., 0], 1.0)
     np.testing.assert_allclose(new_trust, 1.0)
-
-
-def test_a_thin_hidden_strip_takes_the_colour_of_the_skin_beside_it(regions):
-    """A glasses rim's strip across a face whose tint changes across the face (a ruddy cheek, a paler forehead):
-    filled from the skin beside it, its colour is the true one there; the face's median ratio (local_reach 0)
-    misses the tint. Far from trusted skin the fill is the median's."""
-    rows = np.linspace(0.0, 1.0, SIZE)[:, None, None]
-    person = _prior(regions) * (0.6 + 0.5 * rows * np.array([1.2, 0.8, 0.7]))  # redder towards the chin
-    seen = np.ones((SIZE, SIZE))
-    strip = np.zeros((SIZE, SIZE), bool)
-    strip[68:75, 20:108] = True  # hidden: a rim seven texels wide
-    seen[strip] = 0.0
-    fitted = np.where(strip[..., None], _prior(regions), person)  # stage 3 leaves unseen texels at T^0
-    middle = np.zeros_like(strip)
-    middle[71, 30:98] = True  # the rim's middle, where the trust's blur leaves nothing of the fit
-    middle &= regions.face & ~regions.lips
-    local = complete_map(fitted, _prior(regions), seen, regions, CompletionConfig())
-    median = complete_map(fitted, _prior(regions), seen, regions, CompletionConfig(local_reach=0.0))
-    local_error = np.abs(local[middle] - person[middle]).mean()
-    assert local_error < 0.5 * np.abs(median[middle] - person[middle]).mean() and local_error < 0.01
-
-    far = np.zeros((SIZE, SIZE))  # nothing trusted within reach of the top rows: the median takes over
-    far[60:] = 1.0
-    top = complete_map(person, _prior(regions), far, regions, CompletionConfig())[:8][regions.face[:8]]
-    skin = regions.face & ~regions.lips & (far > 0)
-    gain = np.median(person[skin] / _prior(regions)[skin], 0)
-    np.testing.assert_allclose(np.median(top, 0), _prior(regions)[0, 0] * gain, rtol=0.02)

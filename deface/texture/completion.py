@@ -5,10 +5,8 @@ Inputs are the fitted maps T, the albedo model's maps T^0 at the fitted coeffici
 trust t = blur(clip(seen / seen_full, 0, 1)) (blurred so no seam shows where visibility stops):
 1. mirror: where the u-mirrored texel is more trusted (a turned face), T moves towards mirror(T) by the
    difference of trust, and t becomes max(t, mirror t); only for a layout symmetric in u;
-2. the person's skin: the rest is T^0 x g, g the per-channel ratio T / T^0 of the trusted skin around it (within
-   ``local_reach``: what a glasses frame or a strand hid takes the colour of the skin beside it), or, far from
-   trusted skin, its median over the face, so unseen skin (ears, neck, the far side) takes the person's tone with
-   the prior's structure;
+2. the person's skin: the rest is T^0 x g, g the per-channel median ratio T / T^0 over trusted texels, so
+   unseen skin (ears, neck, the far side) takes the person's tone with the prior's structure;
 3. the mouth cavity (the inner rolls of the lips, facing into the mouth) takes the person's lip colour
    darkened to a cavity's shade where it was not seen.
 Trusted texels keep their fitted value exactly (t = 1).
@@ -43,10 +41,6 @@ class CompletionConfig:
     """Copy from the mirrored texel where it was seen better (layouts symmetric in u only)."""
     cavity_shade: float = 0.35
     """The mouth cavity's colour: the person's lip colour times this (a cavity gets little light)."""
-    local_reach: float = 0.02
-    """Gaussian sigma, as a fraction of the map's side, of the neighbourhood whose trusted skin sets a filled
-    texel's colour (T^0 times the ratio T / T^0 averaged around it: under a glasses frame, the skin beside it);
-    where little skin around is trusted, the face's median ratio takes over. 0: the median ratio everywhere."""
 
 
 @dataclass(frozen=True)
@@ -80,25 +74,6 @@ def skin_gain(texture: np.ndarray, prior: np.ndarray, trust: np.ndarray, skin: n
     return np.median(texture[chosen] / np.maximum(prior[chosen], 1e-4), axis=0)
 
 
-LOCAL_ANCHOR = 0.02
-"""Weight, in trusted texels per Gaussian footprint's share, of the face's median ratio in :func:`local_gain`: a
-filled texel with under a fiftieth of its neighbourhood trusted takes mostly the median."""
-
-
-def local_gain(texture: np.ndarray, prior: np.ndarray, trust: np.ndarray, skin: np.ndarray,
-               sigma: float) -> np.ndarray:
-    """[Ht, Wt, C]: the ratio texture / prior of the trusted (> 0.9) skin around each texel (a normalised Gaussian
-    average of its log over ``sigma`` texels), pulled towards :func:`skin_gain` by :data:`LOCAL_ANCHOR`."""
-    overall = np.log(skin_gain(texture, prior, trust, skin))
-    weight = ((trust > 0.9) & skin).astype(np.float64)
-    if sigma <= 0 or weight.sum() < MIN_TRUSTED:
-        return np.broadcast_to(np.exp(overall), texture.shape).copy()
-    ratio = np.log(np.maximum(texture, 1e-4) / np.maximum(prior, 1e-4)) * weight[..., None]
-    around = ndimage.gaussian_filter(weight, sigma)[..., None]
-    total = np.stack([ndimage.gaussian_filter(ratio[..., c], sigma) for c in range(texture.shape[-1])], -1)
-    return np.exp((total + LOCAL_ANCHOR * overall) / (around + LOCAL_ANCHOR))
-
-
 def complete_map(texture: np.ndarray, prior: np.ndarray, seen: np.ndarray, regions: CompletionRegions,
                  config: CompletionConfig, cavity: bool = False) -> np.ndarray:
     """One completed map [Ht, Wt, C]; ``cavity`` also shades the unseen mouth cavity (diffuse map)."""
@@ -107,7 +82,7 @@ def complete_map(texture: np.ndarray, prior: np.ndarray, seen: np.ndarray, regio
         texture, trust = mirror_fill(texture, trust)
     skin = regions.face & ~regions.lips
     gain = skin_gain(texture, prior, trust, skin)
-    fill = prior * local_gain(texture, prior, trust, skin, config.local_reach * texture.shape[0])
+    fill = prior * gain
     if cavity:
         lip_colour = _lip_colour(texture, prior * gain, trust, regions.lips & ~regions.cavity)
         fill = np.where(regions.cavity[..., None], lip_colour * config.cavity_shade, fill)
