@@ -307,7 +307,7 @@ class SkinColourClassifier:
         skin = 1.0 / (1.0 + np.exp((distance - cfg.threshold) / cfg.softness))
         occluders = self._occluders(srgb, region, points, diagonal) if cfg.occluders.enabled and mediapipe else None
         if cfg.mouth_opening and mediapipe:
-            mouth = cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(cfg.occluders.grow))
+            mouth = cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(1))  # its soft edge
             occluders = mouth.astype(bool) if occluders is None else occluders | mouth.astype(bool)
 
         size = max(3, int(round(cfg.smoothing * diagonal)) | 1)
