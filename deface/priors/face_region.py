@@ -307,8 +307,8 @@ class SkinColourClassifier:
         skin = 1.0 / (1.0 + np.exp((distance - cfg.threshold) / cfg.softness))
         occluders = self._occluders(srgb, region, points, diagonal) if cfg.occluders.enabled and mediapipe else None
         if cfg.mouth_opening and mediapipe:
-            mouth = cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(1))  # its soft edge
-            occluders = mouth.astype(bool) if occluders is None else occluders | mouth.astype(bool)
+            mouth = cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(1)).astype(bool)  # soft edge
+            occluders = mouth if occluders is None else occluders | mouth
 
         size = max(3, int(round(cfg.smoothing * diagonal)) | 1)
         skin = np.where(region, skin, 0.0).astype(np.float32)
