@@ -117,3 +117,32 @@ def test_with_coherence_a_shadow_s_edge_keeps_its_weight_and_a_beard_does_not():
     assert weight[BAND][:, 20:140].mean() > 0.6
     assert weight[100:130, 60:100].mean() < 0.05
     assert weight[70:85, 20:40].mean() > 0.6
+
+
+def test_the_hair_zone_keeps_a_beard_weighed_down_and_a_forehead_s_stripes_weighed(photos):
+    """nextface-s1 with thin dark stripes drawn over its forehead: everywhere on the face both the stripes' edges
+    and the stubble are weighed down; with ``hair_zone`` the stubble (in the beard's reach) still is, the
+    forehead's stripes count as every pixel does."""
+    from deface.io.images import load_image, srgb_to_linear
+    from deface.landmarks.detect import detect_landmarks
+    from deface.priors.face_region import MEDIAPIPE_CHIN, beard_zone_mask
+
+    image = srgb_to_linear(load_image(photos / "nextface-s1.png"))
+    points = detect_landmarks(load_image(photos / "nextface-s1.png")).points[:, :2]
+    size = float(np.hypot(*np.ptp(points, axis=0)))
+    brow, top = points[[105, 334], 1].min(), points[10, 1]  # the brows' tops, the forehead's top
+    rows = slice(int(top + 0.2 * (brow - top)), int(brow - 0.15 * (brow - top)))
+    columns = np.arange(image.shape[1])
+    stripes = np.where((columns // 4) % 2 == 0, 0.35, 1.0)  # 4-pixel stripes of shade
+    image[rows] *= stripes[None, :, None]
+    face = ndimage.binary_dilation(beard_zone_mask(points, image.shape[:2]), iterations=40).astype(float)
+    face[rows] = 1.0
+    forehead = (slice(rows.start, int(brow - 0.5 * (brow - top))), slice(int(points[105, 0]), int(points[334, 0])))
+    chin = np.round(points[MEDIAPIPE_CHIN]).astype(int)
+    beard = (slice(chin[1] - 25, chin[1] - 5), slice(chin[0] - 20, chin[0] + 20))
+    config = ShadingEvidenceConfig()
+    everywhere = texture_weight(image, face, size, config, points)
+    zoned = texture_weight(image, face, size, replace(config, hair_zone=0.02), points)
+    assert everywhere[forehead].mean() < 0.5 and zoned[forehead].min() > 0.99
+    np.testing.assert_allclose(zoned[beard], everywhere[beard])
+    assert zoned[beard].mean() < 0.75  # the stubble is still weighed down

@@ -82,8 +82,9 @@ def _weighted_by_evidence(context: StageContext) -> StageContext:
     inputs = context.inputs
     sizes = inputs.landmarks.face_size if inputs.landmarks.face_size is not None else \
         torch.full((inputs.num_frames,), float(max(context.target.size)) / 2)
-    weighted = tuple(h * torch.as_tensor(texture_weight(context.target.images[frame].numpy(), h.numpy(),
-                                                        float(sizes[frame]), evidence))
+    target = context.target
+    weighted = tuple(h * torch.as_tensor(texture_weight(target.images[frame].numpy(), h.numpy(), float(sizes[frame]),
+                                                        evidence, target.landmarks[frame].points))
                      for frame, h in enumerate(inputs.face_classifier))
     context.decoupling.set_evidence(torch.stack(weighted))
     return replace(context, inputs=replace(inputs, face_classifier=weighted))

@@ -159,6 +159,13 @@ def beard_reach_mask(landmarks: np.ndarray, shape: tuple[int, int], margin: int)
     return zone | (grown & below)
 
 
+def hair_zone_mask(landmarks: np.ndarray, shape: tuple[int, int], margin: int, reach: int) -> np.ndarray:
+    """[H, W] bool: where a face has fine texture of its own: the brows, eyes (lashes), nostrils and lips grown by
+    ``margin`` pixels, and the beard's reach grown by ``reach`` (MediaPipe 468/478 layout; features only for
+    iBUG-68)."""
+    return feature_mask_from_landmarks(landmarks, shape, margin) | beard_reach_mask(landmarks, shape, reach)
+
+
 def mouth_opening_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """[H, W] bool: the polygon of the inner lip contour, the mouth's opening (empty when the mouth is closed and
     for layouts other than MediaPipe's 468/478)."""

@@ -30,6 +30,7 @@ import numpy as np
 from scipy import ndimage
 
 from deface.io.images import LUMINANCE
+from deface.priors.face_region import hair_zone_mask
 
 
 @dataclass(frozen=True)
@@ -59,11 +60,21 @@ class ShadingEvidenceConfig:
     photos lost their beards (docs/textures.md)."""
     floor: float = 1e-3
     """Least linear luminance of the log (dark pixels' noise stays finite)."""
+    hair_zone: float = -1.0
+    """Weigh pixels only where a face has fine texture of its own: the brows, eyes (lashes), nostrils and lips grown
+    by this share of the face's size, and the beard's reach (``beard_reach``); elsewhere (the forehead, the nose's
+    bridge, the upper cheeks) fine texture is a shadow's edge, and every pixel counts. The zone's edge is blended
+    over half this share. Negative = everywhere on the face (MediaPipe landmarks only)."""
+    beard_reach: float = 0.06
+    """With ``hair_zone``: the beard zone (below the nose's base, within the face outline) grows by this share of
+    the face's size below the alae's line (a beard runs past the outline's points onto the jaw's underside)."""
 
 
-def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config: ShadingEvidenceConfig) -> np.ndarray:
+def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config: ShadingEvidenceConfig,
+                   landmarks: np.ndarray | None = None) -> np.ndarray:
     """[H, W] in (0, 1]: the weight of each pixel of ``image`` (linear RGB [H, W, 3]) in stage 2's L_pho; ``face``
-    [H, W] in [0, 1] (h) says where the face's median energy is taken, ``face_size`` in pixels."""
+    [H, W] in [0, 1] (h) says where the face's median energy is taken, ``face_size`` in pixels; ``landmarks``
+    [N, 2] pixels place ``hair_zone``."""
     if config.strength <= 0:
         return np.ones(image.shape[:2], np.float32)
     log_luminance = np.log(np.maximum(image @ LUMINANCE, config.floor))
@@ -76,7 +87,20 @@ def texture_weight(image: np.ndarray, face: np.ndarray, face_size: float, config
         energy = np.maximum(energy - step_energy(log_luminance, fine_scale, energy_scale), 0.0)
     if config.coherence_power > 0:
         energy = energy * (1.0 - coherence(fine, energy_scale)) ** config.coherence_power
-    return np.exp(-energy / (config.strength * max(reference, 1e-12))).astype(np.float32)
+    weight = np.exp(-energy / (config.strength * max(reference, 1e-12)))
+    if config.hair_zone >= 0 and landmarks is not None and landmarks.shape[0] in (468, 478):
+        weight = 1.0 - _hair_zone(landmarks, image.shape[:2], face_size, config) * (1.0 - weight)
+    return weight.astype(np.float32)
+
+
+def _hair_zone(landmarks: np.ndarray, shape: tuple[int, int], face_size: float,
+               config: ShadingEvidenceConfig) -> np.ndarray:
+    """[H, W] in [0, 1]: 1 over the zone (:func:`hair_zone_mask`), falling to 0 within half ``hair_zone`` beyond."""
+    margin = config.hair_zone * face_size
+    zone = hair_zone_mask(landmarks, shape, round(margin), round(config.beard_reach * face_size))
+    if margin < 2:
+        return zone.astype(np.float64)
+    return np.minimum(2.0 * ndimage.gaussian_filter(zone.astype(np.float64), margin / 4, mode="nearest"), 1.0)
 
 
 def coherence(fine: np.ndarray, scale: float) -> np.ndarray:
