@@ -27,6 +27,7 @@ from deface.models.albedo_prior import AlbedoPriorConfig
 from deface.models.registry import TONE_AXIS
 from deface.priors.face_region import SkinClassifierConfig
 from deface.priors.illuminant import IlluminantConfig
+from deface.priors.occluders import HandConfig
 from deface.priors.shading_evidence import ShadingEvidenceConfig
 from deface.render.renderer import RenderConfig
 from deface.texture.chroma import ChromaConfig
@@ -453,6 +454,8 @@ class FitConfig:
     """The diffuse map's chroma held to its luminance after stage 3, before completion (deface/texture/chroma.py)."""
     skin_classifier: SkinClassifierConfig = field(default_factory=SkinClassifierConfig)
     """The offline face-region classifier h (deface/priors/face_region.py), used without BiSeNet's weights."""
+    hands: HandConfig = field(default_factory=HandConfig)
+    """Hands over the face (MediaPipe's hand landmarks) left out of h (deface/priors/occluders.py)."""
     shading_evidence: ShadingEvidenceConfig = field(default_factory=ShadingEvidenceConfig)
     """Which pixels stage 2 fits its lights, masks and geometry to (deface/priors/shading_evidence.py): less
     where the photo has hair-like fine texture."""
@@ -562,6 +565,7 @@ PAPER = {
     "chroma.enabled": False,
     "skin_classifier.occluders.enabled": False,
     "skin_classifier.mouth_opening": False,
+    "hands.enabled": False,
     "skin_classifier.beard_zone": False,
     "skin_classifier.hull_margin": 0.0,
     "shading_evidence.strength": 0.0,

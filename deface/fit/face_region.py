@@ -1,5 +1,5 @@
 """The face region h a fit uses as M_o: which classifier makes it (the user's BiSeNet weights, else the offline
-skin classifier), and h per frame from the stage-1 face."""
+skin classifier), and h per frame from the stage-1 face, less the hands MediaPipe finds over it."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from deface.fit.log import FitLog
 from deface.fit.state import PosedFace
 from deface.fit.target import FitTarget
 from deface.priors.face_region import load_face_region_classifier
+from deface.priors.occluders import HandConfig, hand_mask, reaches_in
 
 
 @torch.no_grad()
@@ -22,9 +23,28 @@ def face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, model
     found = []
     for frame in range(target.num_frames):
         _, fragments = face.fragments(frame)
-        h = classifier(target.frames_srgb[frame], fragments.mask.numpy(), target.landmarks[frame].points)
-        found.append(torch.as_tensor(np.asarray(h), dtype=torch.float32))
+        image, points = target.frames_srgb[frame], target.landmarks[frame].points
+        h = np.asarray(classifier(image, fragments.mask.numpy(), points))
+        found.append(torch.as_tensor(without_hands(h, image, points, config.hands, log, frame), dtype=torch.float32))
     return tuple(found), note
+
+
+def without_hands(h: np.ndarray, image: np.ndarray, face: np.ndarray, config: HandConfig, log: FitLog,
+                  frame: int) -> np.ndarray:
+    """``h`` [H, W] with the hands MediaPipe finds in ``image`` that reach in over the face (its landmarks ``face``
+    [N, 2]) set to 0 (said in ``log``)."""
+    if not config.enabled:
+        return h
+    from deface.landmarks.hands import detect_hands
+
+    covered = np.zeros(h.shape, bool)
+    for points in detect_hands(image, min_confidence=config.min_confidence):
+        if reaches_in(points, face, config.wrist_beyond):
+            covered |= hand_mask(points, h.shape, config)
+    share = float(h[covered].sum() / max(h.sum(), 1e-6))
+    if share > 0:
+        log.info(f"frame {frame}: a hand covers {100 * share:.0f} % of the face region; left out of h")
+    return np.where(covered, 0.0, h).astype(np.float32)
 
 
 def region_classifier(source: str, models_dir, skin=None):

@@ -27,8 +27,12 @@ texels are filled from the other photos, the face's other side or the skin aroun
 shadow. Measured on the board's thin stripes of shade (BENCHMARKS.md "occluders"), leaving them out is better
 than fitting them.
 
-Limits: a hand or fingers (wide, skin-coloured) are not found; nor a strand or a frame lighter than the skin;
-a frame's rim over a brow stays with the brow (features are never searched).
+A hand or fingers (wide, skin-coloured) are not found by these cues; MediaPipe's hand landmarks find them
+(deface/landmarks/hands.py), and :func:`hand_mask` draws the hand from its 21 points (``FitConfig.hands``).
+
+Limits: a strand or a frame lighter than the skin is not found; a frame's rim over a brow stays with the brow
+(features are never searched); fingers whose hand MediaPipe does not find (the hand's palm out of the picture)
+stay.
 """
 
 from __future__ import annotations
@@ -71,6 +75,57 @@ class OccluderConfig:
     """A lens is tinted when its skin's luminance is under this share of the skin around the frame ..."""
     lens_chroma: float = 0.025
     """... or its chromaticity (r, g) differs from that skin's by more than this."""
+
+
+@dataclass(frozen=True)
+class HandConfig:
+    """Hands over the face, found by MediaPipe's hand landmarks, left out of h (``FitConfig.hands``)."""
+
+    enabled: bool = True
+    """Find hands and leave them out of h, whichever classifier made it (off in ``paper``: its parser has no hand
+    class)."""
+    min_confidence: float = 0.7
+    """MediaPipe's palm detection threshold. At its own default, 0.5, it found a hand in a shirt's collar under a
+    beard (one of the board's 69 photos and renders); the hand of alfw1.png, holding a phone to her cheek, is found
+    up to 0.8."""
+    wrist_beyond: float = 0.1
+    """A hand counts when its wrist lies this share of the face's size (its landmarks' box diagonal) beyond the
+    face's outline (:func:`reaches_in`): alfw1.png's hand on her cheek 0.37; a false hand in freckles 0.01."""
+    finger_width: float = 0.25
+    """A finger's width as a share of the palm's length (wrist to the middle finger's knuckle); the drawn hand grows
+    by half of it more (its soft edge, the fingertips' ends beyond their last landmark)."""
+
+
+HAND_BONES = ((0, 1), (1, 2), (2, 3), (3, 4), (0, 5), (5, 6), (6, 7), (7, 8), (5, 9), (9, 10), (10, 11), (11, 12),
+              (9, 13), (13, 14), (14, 15), (15, 16), (13, 17), (0, 17), (17, 18), (18, 19), (19, 20))
+"""MediaPipe's hand connections: the thumb, each finger's three joints, and the palm's outline."""
+HAND_PALM = (0, 1, 5, 9, 13, 17)
+"""The palm's polygon: the wrist, the thumb's base and the four knuckles."""
+
+
+def reaches_in(hand: np.ndarray, face: np.ndarray, margin: float) -> bool:
+    """Whether a hand's wrist (``hand`` [21, 2] pixels) lies beyond the convex hull of the face's landmarks
+    (``face`` [N, 2]) by at least ``margin`` times the hull's box diagonal: a hand over a face reaches in from an arm
+    beyond it. MediaPipe also finds "hands" in a cheek's freckles crossed by strands (the occluder renders),
+    their wrist on the jaw's outline."""
+    face = np.asarray(face, np.float32)
+    hull = cv2.convexHull(face)
+    beyond = -cv2.pointPolygonTest(hull, tuple(float(v) for v in hand[0]), True)
+    return beyond >= margin * float(np.hypot(*np.ptp(face, axis=0)))
+
+
+def hand_mask(points: np.ndarray, shape: tuple[int, int], config: HandConfig) -> np.ndarray:
+    """[H, W] bool: the hand of MediaPipe's 21 ``points`` ([21, 2] pixels): its palm's polygon and a band of
+    ``finger_width`` along every bone, grown by half of it."""
+    points = np.asarray(points, np.float64)
+    palm = float(np.linalg.norm(points[9] - points[0]))
+    width = max(2, round(config.finger_width * palm))
+    mask = np.zeros(shape, np.uint8)
+    scaled = np.round(points * 4).astype(np.int32)  # cv2's shift: quarter-pixel precision
+    cv2.fillPoly(mask, [scaled[list(HAND_PALM)]], 1, lineType=cv2.LINE_8, shift=2)
+    for start, end in HAND_BONES:
+        cv2.line(mask, tuple(scaled[start]), tuple(scaled[end]), 1, thickness=width, lineType=cv2.LINE_8, shift=2)
+    return cv2.dilate(mask, disk(max(1, width // 2))).astype(bool)
 
 
 def disk(radius: int) -> np.ndarray:
