@@ -120,9 +120,9 @@ def test_with_coherence_a_shadow_s_edge_keeps_its_weight_and_a_beard_does_not():
 
 
 def test_the_hair_zone_keeps_a_beard_weighed_down_and_a_forehead_s_stripes_weighed(photos):
-    """nextface-s1 with thin dark stripes drawn over its forehead: everywhere on the face both the stripes' edges
-    and the stubble are weighed down; with ``hair_zone`` the stubble (in the beard's reach) still is, the
-    forehead's stripes count as every pixel does."""
+    """nextface-s1 with thin dark stripes drawn over its forehead: with the evidence everywhere on the face both the
+    stripes' edges and the stubble are weighed down; with ``hair_zone`` (the default) the stubble (in the beard's
+    reach) still is, the forehead's stripes count as every pixel does."""
     from deface.io.images import load_image, srgb_to_linear
     from deface.landmarks.detect import detect_landmarks
     from deface.priors.face_region import MEDIAPIPE_CHIN, beard_zone_mask
@@ -141,8 +141,8 @@ def test_the_hair_zone_keeps_a_beard_weighed_down_and_a_forehead_s_stripes_weigh
     chin = np.round(points[MEDIAPIPE_CHIN]).astype(int)
     beard = (slice(chin[1] - 25, chin[1] - 5), slice(chin[0] - 20, chin[0] + 20))
     config = ShadingEvidenceConfig()
-    everywhere = texture_weight(image, face, size, config, points)
-    zoned = texture_weight(image, face, size, replace(config, hair_zone=0.02), points)
+    everywhere = texture_weight(image, face, size, replace(config, hair_zone=-1.0), points)
+    zoned = texture_weight(image, face, size, config, points)
     assert everywhere[forehead].mean() < 0.5 and zoned[forehead].min() > 0.99
     np.testing.assert_allclose(zoned[beard], everywhere[beard])
     assert zoned[beard].mean() < 0.75  # the stubble is still weighed down

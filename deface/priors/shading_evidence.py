@@ -60,11 +60,13 @@ class ShadingEvidenceConfig:
     photos lost their beards (docs/textures.md)."""
     floor: float = 1e-3
     """Least linear luminance of the log (dark pixels' noise stays finite)."""
-    hair_zone: float = -1.0
+    hair_zone: float = 0.02
     """Weigh pixels only where a face has fine texture of its own: the brows, eyes (lashes), nostrils and lips grown
     by this share of the face's size, and the beard's reach (``beard_reach``); elsewhere (the forehead, the nose's
     bridge, the upper cheeks) fine texture is a shadow's edge, and every pixel counts. The zone's edge is blended
-    over half this share. Negative = everywhere on the face (MediaPipe landmarks only)."""
+    over half this share. On the board every split gained (the pairs' texture swap +0.07 / +0.54 / +1.05 dB,
+    detail-synth's beard kept 0.36 -> 0.41; docs/textures.md "Where the evidence counts"). Negative = everywhere
+    on the face, as before (MediaPipe landmarks only)."""
     beard_reach: float = 0.06
     """With ``hair_zone``: the beard zone (below the nose's base, within the face outline) grows by this share of
     the face's size below the alae's line (a beard runs past the outline's points onto the jaw's underside)."""
