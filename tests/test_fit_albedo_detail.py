@@ -104,13 +104,15 @@ def one_light_default_kept(shared) -> float:
 
 @pytest.mark.slow
 def test_a_goatee_under_one_light_stays_in_the_albedo(one_light_default_kept):
-    assert one_light_default_kept > 0.6
+    # 0.58 with the shading evidence in the hair zone (the default since 2026-11-28), 0.60 with it over the whole
+    # face; detail-synth's truth renders keep more with the zone (beard 0.41 against 0.36, BENCHMARKS.md).
+    assert one_light_default_kept > 0.55
 
 
 @pytest.mark.slow
 def test_the_no_cast_shadows_preset_keeps_more_of_a_goatee_under_one_light(one_light_default_kept):
-    # Its lights fit fewer of the finely textured pixels (stage 2's shading evidence at 0.4), so less of the
-    # goatee's darkness is explained as light (0.67 against the default's 0.61 here; report split 1's unshadowed
+    # Its lights fit fewer of the finely textured pixels (stage 2's shading evidence at 0.4, over the whole face),
+    # so less of the goatee's darkness is explained as light (0.67 against the default's 0.58 here; report split 1's unshadowed
     # renders 0.97 against 0.43, docs/textures.md "Photos without cast shadows").
     truth = albedo()
     preset = kept(*fit(truth, preset="no-cast-shadows"), truth.astype(np.float64))

@@ -20,8 +20,8 @@ preset's differences from the default.
   loss covers the whole render mask.
 - ``nextface-star``: ``nextface`` restricted to the face region h (NextFace* of the paper).
 - ``no-cast-shadows``: ``deface`` for photos without cast shadows (a studio, an even or a single key light; no hat brim,
-  hair, leaves or hand over the face): stage 2's shading evidence at strength 0.4 instead of 1.5, so the lights
-  fit fewer of the pixels with fine texture and a beard, stubble, freckles and moles stay in the maps. The lights
+  hair, leaves or hand over the face): stage 2's shading evidence at strength 0.4 instead of 1.5, over the whole
+  face rather than the hair zone, so the lights fit fewer of the pixels with fine texture and a beard, stubble, freckles and moles stay in the maps. The lights
   then explain less of the face's own shading (dark eye sockets under a key from above, a seam down the nose under
   a side key), and a cast shadow's edge goes into the map: docs/textures.md "Photos without cast shadows".
 - ``fast``: ``deface`` with fewer iterations, a 192-px working image and 256-px textures, for previews and
@@ -78,8 +78,9 @@ PRESETS: dict[str, dict] = {
     "code-portrait": _code(num_lights=7, epsilon=0.09, w1=1.0, w2=120, w4=5, scale=1.0, sh_lr=0.003, stage2=1500),
     "nextface": NEXTFACE,
     "nextface-star": {**NEXTFACE, "decouple.restrict_to_face": True},
-    # Photos without cast shadows: stage 2 leaves fine texture (a beard, stubble, freckles) to the maps sooner.
-    "no-cast-shadows": {"shading_evidence.strength": 0.4},
+    # Photos without cast shadows: stage 2 leaves fine texture (a beard, stubble, freckles) to the maps sooner,
+    # over the whole face (no shadow's edge to fit outside the hair zone).
+    "no-cast-shadows": {"shading_evidence.strength": 0.4, "shading_evidence.hair_zone": -1.0},
     "fast": {"resolution": 192, "texture_size": 256, "render.shadow_rays": 64, "iterations.stage1": 150,
              "iterations.stage2": 150, "iterations.stage3": 60, "decouple.ace_iteration": 50},
 }
@@ -100,7 +101,7 @@ DESCRIPTIONS = {
     "nextface": "Single-light baseline: one light, no f, no g, no priors; L_pho over the whole render mask.",
     "nextface-star": "NextFace*: nextface with L_pho restricted to the face region h.",
     "no-cast-shadows": "deface for photos without cast shadows (hats, hair, leaves, hands): keeps a beard, stubble "
-                       "and freckles (stage 2's shading evidence at 0.4), leaves more of the face's own shading in "
+                       "and freckles (stage 2's shading evidence at 0.4, over the whole face), leaves more of the face's own shading in "
                        "the map.",
     "fast": "deface with fewer steps, 192-px working image and 256-px textures: previews and tests.",
 }
