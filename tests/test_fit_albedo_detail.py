@@ -112,8 +112,8 @@ def test_a_goatee_under_one_light_stays_in_the_albedo(one_light_default_kept):
 @pytest.mark.slow
 def test_the_no_cast_shadows_preset_keeps_more_of_a_goatee_under_one_light(one_light_default_kept):
     # Its lights fit fewer of the finely textured pixels (stage 2's shading evidence at 0.4, over the whole face),
-    # so less of the goatee's darkness is explained as light (0.67 against the default's 0.58 here; report split 1's unshadowed
-    # renders 0.97 against 0.43, docs/textures.md "Photos without cast shadows").
+    # so less of the goatee's darkness is explained as light (0.67 against the default's 0.58 here; report split
+    # 1's unshadowed renders 0.97 against 0.43, docs/textures.md "Photos without cast shadows").
     truth = albedo()
     preset = kept(*fit(truth, preset="no-cast-shadows"), truth.astype(np.float64))
     assert preset > one_light_default_kept + 0.03

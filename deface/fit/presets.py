@@ -21,9 +21,10 @@ preset's differences from the default.
 - ``nextface-star``: ``nextface`` restricted to the face region h (NextFace* of the paper).
 - ``no-cast-shadows``: ``deface`` for photos without cast shadows (a studio, an even or a single key light; no hat brim,
   hair, leaves or hand over the face): stage 2's shading evidence at strength 0.4 instead of 1.5, over the whole
-  face rather than the hair zone, so the lights fit fewer of the pixels with fine texture and a beard, stubble, freckles and moles stay in the maps. The lights
-  then explain less of the face's own shading (dark eye sockets under a key from above, a seam down the nose under
-  a side key), and a cast shadow's edge goes into the map: docs/textures.md "Photos without cast shadows".
+  face rather than the hair zone, so the lights fit fewer of the pixels with fine texture and a beard, stubble,
+  freckles and moles stay in the maps. The lights then explain less of the face's own shading (dark eye sockets
+  under a key from above, a seam down the nose under a side key), and a cast shadow's edge goes into the map:
+  docs/textures.md "Photos without cast shadows".
 - ``fast``: ``deface`` with fewer iterations, a 192-px working image and 256-px textures, for previews and
   tests.
 - ``deface-mean-skin``: ``deface`` before it kept the tone (the earlier default exactly, with L_pho's clipped
@@ -101,8 +102,8 @@ DESCRIPTIONS = {
     "nextface": "Single-light baseline: one light, no f, no g, no priors; L_pho over the whole render mask.",
     "nextface-star": "NextFace*: nextface with L_pho restricted to the face region h.",
     "no-cast-shadows": "deface for photos without cast shadows (hats, hair, leaves, hands): keeps a beard, stubble "
-                       "and freckles (stage 2's shading evidence at 0.4, over the whole face), leaves more of the face's own shading in "
-                       "the map.",
+                       "and freckles (stage 2's shading evidence at 0.4, over the whole face), leaves more of the "
+                       "face's own shading in the map.",
     "fast": "deface with fewer steps, 192-px working image and 256-px textures: previews and tests.",
 }
 """One line per preset (``deface presets``); the module docstring says what each is for."""

@@ -15,13 +15,11 @@ import numpy as np
 from deface.landmarks.detect import _to_uint8
 from deface.landmarks.quiet import native_log_filter, quiet_environment
 
-HAND_POINTS = 21
-"""MediaPipe's hand landmarks: 0 the wrist, then four per finger from the thumb (1-4) to the little finger (17-20)."""
-
 
 def detect_hands(image: np.ndarray, max_hands: int = 2, min_confidence: float = 0.7) -> list[np.ndarray]:
     """The hands in ``image`` ([H, W, 3] sRGB, float in [0, 1] or uint8): one [21, 2] float32 array of pixel
-    positions (x right, y down) per hand found, at most ``max_hands``."""
+    positions (x right, y down) per hand found, at most ``max_hands``: 0 the wrist, then four per finger from the
+    thumb (1-4) to the little finger (17-20)."""
     pixels = _to_uint8(image)
     quiet_environment()
     with ExitStack() as stack:
