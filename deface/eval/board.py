@@ -157,12 +157,12 @@ class BoardRun:
 
 
 def _pair_split(run: BoardRun, split: PairSplit, config: FitConfig, out_dir: Path, models_dir) -> None:
+    """``config`` is the pairs' own (the judged one with the pair splits' schedule, :func:`run_board`)."""
     pairs = read_pairs(make_pairs(split, out_dir / "pairs" / split.name))
-    quick = override(config, **SCHEDULES["quick"])
     for pair in pairs:
         folder = out_dir / "fits" / split.name / pair.name
-        run.add(split.name, RecordedTask(f"{split.name} / {pair.name}", folder / "scores.json", quick,
-                                         partial(pair_scores, pair, quick, folder, models_dir)))
+        run.add(split.name, RecordedTask(f"{split.name} / {pair.name}", folder / "scores.json", config,
+                                         partial(pair_scores, pair, config, folder, models_dir)))
     run.readers[split.name] = pair_figures
 
 
@@ -219,9 +219,11 @@ def tone_figures(photos, records: list[dict]) -> dict:
 
 
 def run_board(config: FitConfig, out_dir: Path, names: list[str], jobs: int = 2, models_dir=None,
-              log=print) -> dict[str, dict]:
+              log=print, pair_schedule: dict | None = None) -> dict[str, dict]:
     """Fit every split of ``names`` with ``config`` (recorded, so a re-run fits only what changed) -> {split:
-    {measure: value}}."""
+    {measure: value}}. The pair splits are fitted with ``pair_schedule``'s settings over ``config`` (default: the
+    quick schedule; the truth splits as ``config`` is)."""
+    pair_config = override(config, **(SCHEDULES["quick"] if pair_schedule is None else pair_schedule))
     run = BoardRun()
     by_name = {s.name: s for s in SPLITS}
     unknown = [n for n in names if n not in by_name]
@@ -229,8 +231,10 @@ def run_board(config: FitConfig, out_dir: Path, names: list[str], jobs: int = 2,
         raise ValueError(f"unknown board split(s) {', '.join(unknown)}; known: {', '.join(by_name)}")
     for name in names:
         split = by_name[name]
-        add = _pair_split if isinstance(split, PairSplit) else _truth_split
-        add(run, split, config, Path(out_dir), models_dir)
+        if isinstance(split, PairSplit):
+            _pair_split(run, split, pair_config, Path(out_dir), models_dir)
+        else:
+            _truth_split(run, split, config, Path(out_dir), models_dir)
     records = run_recorded(run.tasks, jobs, models_dir, lambda index, _: log(f"{run.tasks[index].name}: done"))
     return {name: run.readers[name]([r for r, owner in zip(records, run.owners, strict=True) if owner == name])
             for name in names}
