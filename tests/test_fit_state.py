@@ -115,6 +115,29 @@ def test_load_fit_re_renders_the_fit_within_one_level(written):
     assert np.allclose(fit.pose.identity.numpy(), params["identity"])
 
 
+def test_a_frames_registered_uvs_are_written_and_reloaded(state, tmp_path):
+    """A frame whose UVs were moved into register (deface/fit/frame_register.py) is reloaded sampling the maps
+    where it did, and re-renders as it was written."""
+    import dataclasses
+
+    from deface.fit.frame_register import with_uvs
+
+    output = state.output()
+    uvs = (output.frames[0].geometry.mesh.uvs + torch.tensor([0.01, -0.005])).clamp(0, 1)
+    moved = dataclasses.replace(output, frames=(with_uvs(output.frames[0], uvs),))
+    moved = dataclasses.replace(moved, renders=tuple(moved.render()))
+    assert not torch.equal(moved.renders[0].face, output.renders[0].face)
+    folder = tmp_path / "moved"
+    write_fit(moved, folder, {"path": "synthetic", "kind": "image", "frames": [0]})
+    fit = load_fit(folder)
+    assert torch.allclose(fit.frames[0].geometry.mesh.uvs, uvs)
+    assert torch.allclose(fit.render()[0].face, moved.renders[0].face, atol=2e-3)
+    plain = tmp_path / "plain"
+    write_fit(output, plain, {"path": "synthetic", "kind": "image", "frames": [0]})
+    with np.load(plain / "params.npz") as arrays:
+        assert "frame_uvs" not in arrays.files  # unmoved frames store nothing
+
+
 def test_an_older_output_says_what_is_missing(written, tmp_path):
     old = tmp_path / "old"
     old.mkdir()

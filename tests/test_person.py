@@ -107,10 +107,12 @@ def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, tmp_pa
     args = ["fit", "--person", "ada", str(images / "ita30_even.png"), str(images / "ita30_key.png"),
             str(tmp_path / "blank.png"), "-o", str(tmp_path / "out")]
     args += [f"--set={path}={value}" for path, value in SCHEDULES["smoke"].items()]
+    args += ["--set=registration.enabled=true"]  # the photos' UVs brought into register, written and reloaded
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     folder = tmp_path / "out" / "ada"
     params = json.loads((folder / "params.json").read_text())
+    assert sum("registered to the others" in note for note in params["notes"]) == 2
     record = params["input"]
     assert record["kind"] == "person" and [p["path"] for p in record["photos"]] == [
         str(images / "ita30_even.png"), str(images / "ita30_key.png")]

@@ -56,6 +56,8 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
     frames = []
     for frame in range(pose.expression.shape[0]):
         geometry = frozen_geometry(model, pose, frame, framing)
+        if "frame_uvs" in arrays:  # the frame's UVs moved into register (deface/fit/frame_register.py)
+            geometry = geometry.with_uvs(torch.as_tensor(arrays["frame_uvs"][frame]))
         cast = cast_frame(renderer, geometry.mesh, geometry.camera, _transfer(arrays, frame, config),
                           config.render.supersampling)
         scene = arrays["scene_srgb"][frame].astype(np.float32) / 255.0 if "scene_srgb" in arrays else None

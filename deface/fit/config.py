@@ -33,6 +33,7 @@ from deface.render.renderer import RenderConfig
 from deface.texture.chroma import ChromaConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
+from deface.texture.registration import RegistrationConfig
 
 __all__ = [  # the value handling lives in config_values; callers import it from here with the schema
     "PAPER", "RENAMED", "CropConfig", "DecoupleConfig", "FitConfig", "Iterations", "LearningRates", "LightConfig",
@@ -450,6 +451,9 @@ class FitConfig:
     texel, so no texel is freer than the photos make it."""
     completion: CompletionConfig = field(default_factory=CompletionConfig)
     """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
+    registration: RegistrationConfig = field(default_factory=RegistrationConfig)
+    """The frames of several photos or a clip brought into register in UV before stage 3
+    (deface/texture/registration.py)."""
     chroma: ChromaConfig = field(default_factory=ChromaConfig)
     """The diffuse map's chroma held to its luminance after stage 3, before completion (deface/texture/chroma.py)."""
     skin_classifier: SkinClassifierConfig = field(default_factory=SkinClassifierConfig)

@@ -68,6 +68,11 @@ class FrameGeometry:
     mesh: Mesh
     camera: Camera
 
+    def with_uvs(self, uvs: torch.Tensor) -> FrameGeometry:
+        """The same frame sampling the maps at ``uvs`` [U, 2] (moved into register: deface/fit/frame_register.py)."""
+        mesh = self.mesh
+        return FrameGeometry(Mesh(mesh.vertices, mesh.triangles, uvs, mesh.triangle_uvs), self.camera)
+
 
 def frame_geometry(model: FaceModel, scene: SceneParameters, topology: dict, frame: int,
                    size: tuple[int, int], pixel_scale: float = 1.0,

@@ -10,6 +10,7 @@ the step that predicts the held-out ones best (deface/fit/holdout.py).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +18,7 @@ import torch
 
 from deface.fit import fast_stage3, rendering
 from deface.fit.convergence import converged
+from deface.fit.frame_register import frame_uvs, registers, with_uvs
 from deface.fit.guard import StepGuard
 from deface.fit.holdout import BestStep, HeldOutPixels
 from deface.fit.scene import FrameGeometry
@@ -79,9 +81,10 @@ class TextureParameters(torch.nn.Module):
 
 
 def texture_gates(context: StageContext, views: list[TexelView], size: int) -> list[torch.Tensor]:
-    """The pyramid's gates from the frames' texel density (pixels per texel, summed over frames)."""
+    """The pyramid's gates from the frames' texel density (pixels per texel; several frames: ``frames``)."""
     config = context.config.texture_pyramid
-    density = np.sum([view.density for view in views], axis=0)
+    combine = {"best": np.max, "sum": np.sum}[config.frames]
+    density = combine([view.density for view in views], axis=0)
     return level_gates(density, level_sizes(size, config), config.gated, config.gate_power)
 
 
@@ -106,6 +109,11 @@ def run_stage3(context: StageContext, human_prior=None) -> Stage3Result:
     initial = initial_textures(context)
     frozen = freeze_frames(context, initial)
     views = frame_views(context.model, frozen, initial.diffuse.shape[0])
+    if registers(context):  # several frames: each samples the maps where its own detail belongs
+        uvs = frame_uvs(context, frozen, views, initial, render_frozen)
+        frozen = [_referenced(context, with_uvs(frame, moved), initial)
+                  for frame, moved in zip(frozen, uvs, strict=True)]
+        views = frame_views(context.model, frozen, initial.diffuse.shape[0])
     parameters = TextureParameters(initial, texture_gates(context, views, initial.diffuse.shape[0]))
     optimiser = torch.optim.Adam(_parameter_groups(context, parameters, initial))
     guard = StepGuard(optimiser, "stage 3", context.log)  # NaN/Inf rollback (deface/fit/guard.py)
@@ -199,10 +207,19 @@ def _freeze(context: StageContext, frame: int, initial: Textures) -> FrozenFrame
     transfer = context.shadow_caches[frame].get(geometry.mesh) if context.config.render.shadows else None
     cast = cast_frame(context.renderer, geometry.mesh, geometry.camera, transfer, context.config.render.supersampling)
     output = shade_frame(context.renderer, cast, initial, context.kept_lights)
-    coverage = output.mask
-    face_region = context.decoupling.face_region(frame, coverage, context.inputs.face_classifier[frame])
-    reference = AlbedoReference(output.diffuse, output.specular, output.roughness)
-    return FrozenFrame(frame, geometry, cast, face_region.detach(), reference)
+    face_region = context.decoupling.face_region(frame, output.mask, context.inputs.face_classifier[frame])
+    return FrozenFrame(frame, geometry, cast, face_region.detach(), _albedo_reference(output))
+
+
+def _albedo_reference(output: RenderOutput) -> AlbedoReference:
+    return AlbedoReference(output.diffuse, output.specular, output.roughness)
+
+
+@torch.no_grad()
+def _referenced(context: StageContext, frame: FrozenFrame, initial: Textures) -> FrozenFrame:
+    """``frame`` with LP's reference rendered again (its mesh's UVs moved)."""
+    output = shade_frame(context.renderer, frame.cast, initial, context.kept_lights)
+    return dataclasses.replace(frame, reference=_albedo_reference(output))
 
 
 def _topology(context: StageContext):

@@ -22,9 +22,17 @@ from deface.texture.confidence import TexelView, combine_frames, texel_view
 LUMINANCE_T = torch.as_tensor(LUMINANCE, dtype=torch.float32)
 
 def frame_views(model, frozen: list, size: int) -> list[TexelView]:
-    """The texel view of each frozen frame's working-resolution camera for a size² map of ``model``'s layout."""
-    raster = rasterize_uv(model.uvs, model.triangle_uvs, size)
-    return [texel_view(raster, frame.geometry.mesh, frame.geometry.camera) for frame in frozen]
+    """The texel view of each frozen frame's working-resolution camera for a size² map of its mesh's layout:
+    ``model``'s, or its UVs moved into register (deface/fit/frame_register.py)."""
+    layout = rasterize_uv(model.uvs, model.triangle_uvs, size)
+    views = []
+    for frame in frozen:
+        mesh = frame.geometry.mesh
+        uvs = mesh.uvs.numpy()
+        moved = not np.allclose(uvs, model.uvs, atol=1e-7)
+        raster = rasterize_uv(uvs, model.triangle_uvs, size) if moved else layout
+        views.append(texel_view(raster, mesh, frame.geometry.camera))
+    return views
 
 
 def unshadowed_fraction(light_images: torch.Tensor, light_masks: torch.Tensor) -> np.ndarray:

@@ -19,6 +19,7 @@ per-texel parametrisation of the paper.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import torch
@@ -39,6 +40,11 @@ class PyramidConfig:
     """No level is coarser than this many texels per side (fewer levels on small maps)."""
     gated: bool = True
     """Damp each level where the photos give less than a pixel per texel of that level (see the module doc)."""
+    frames: Literal["sum", "best"] = "sum"
+    """How several frames' pixels per texel make the gates: "sum", all frames' together (a texel seen by three
+    frames may be finer than any one frame resolves); "best", the frame that sees it most densely. With the
+    frames brought into register (``registration``) "best" gave the beard its own colour on the person sets, at a
+    cost in PSNR (docs/experiments/person-log.md)."""
     gate_power: float = 2.0
     """Gates are clip(D_l, 0, 1) ** gate_power. Adam steps every parameter by about its learning rate whatever
     its gradient, so a gate is a per-texel speed limit, and a linear one (power 1) still let sparsely seen
