@@ -196,9 +196,8 @@ def fit_arrays(result: FitOutput, renders: list) -> dict[str, np.ndarray]:
     }
     if frames[0].scene_srgb is not None:  # the photo around the crop, for render.png (8 bits, as written)
         arrays["scene_srgb"] = np.stack([to_uint8(frame.scene_srgb, srgb=False) for frame in frames])
-    frame_uvs = [_np(frame.geometry.mesh.uvs) for frame in frames]
-    if any(not np.allclose(uvs, result.model.uvs, atol=1e-7) for uvs in frame_uvs):  # registered frames
-        arrays["frame_uvs"] = np.stack(frame_uvs).astype(np.float32)
+    if any(frame.geometry.moves_uvs(result.model.uvs) for frame in frames):  # registered frames
+        arrays["frame_uvs"] = np.stack([_np(frame.geometry.mesh.uvs) for frame in frames]).astype(np.float32)
     if result.texels.seen is not None:
         arrays["texture_seen"] = result.texels.seen.astype(np.float16)
     if result.texels.confidence is not None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from deface.fit.config import LightConfig
@@ -67,6 +68,10 @@ class FrameGeometry:
 
     mesh: Mesh
     camera: Camera
+
+    def moves_uvs(self, model_uvs) -> bool:
+        """Whether this frame samples the maps elsewhere than the model's UVs [U, 2] (moved into register)."""
+        return not np.allclose(self.mesh.uvs.detach().numpy(), model_uvs, atol=1e-7)
 
     def with_uvs(self, uvs: torch.Tensor) -> FrameGeometry:
         """The same frame sampling the maps at ``uvs`` [U, 2] (moved into register: deface/fit/frame_register.py)."""

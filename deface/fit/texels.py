@@ -27,11 +27,10 @@ def frame_views(model, frozen: list, size: int) -> list[TexelView]:
     layout = rasterize_uv(model.uvs, model.triangle_uvs, size)
     views = []
     for frame in frozen:
-        mesh = frame.geometry.mesh
-        uvs = mesh.uvs.numpy()
-        moved = not np.allclose(uvs, model.uvs, atol=1e-7)
-        raster = rasterize_uv(uvs, model.triangle_uvs, size) if moved else layout
-        views.append(texel_view(raster, mesh, frame.geometry.camera))
+        geometry = frame.geometry
+        moved = geometry.moves_uvs(model.uvs)
+        raster = rasterize_uv(geometry.mesh.uvs.numpy(), model.triangle_uvs, size) if moved else layout
+        views.append(texel_view(raster, geometry.mesh, geometry.camera))
     return views
 
 
