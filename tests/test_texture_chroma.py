@@ -9,7 +9,7 @@ import pytest
 
 from deface.eval.albedo_measures import colour_noise
 from deface.io.images import LUMINANCE
-from deface.texture.chroma import ChromaConfig, filter_chroma
+from deface.texture.chroma import ChromaConfig, filter_chroma, texels_per_pixel
 
 SIZE = 256
 SKIN = np.array([0.55, 0.38, 0.30])
@@ -98,3 +98,39 @@ def test_texels_no_photo_saw_do_not_bleed_into_seen_ones():
 def test_a_constant_map_is_a_fixed_point():
     flat = np.broadcast_to(SKIN, (SIZE, SIZE, 3)).copy()
     np.testing.assert_allclose(filter_chroma(flat, np.ones((SIZE, SIZE)), ChromaConfig()), flat, rtol=1e-9)
+
+
+def _pixel_noise(texels_a_pixel: int, seed: int = 2) -> np.ndarray:
+    """Skin whose colour noise comes from a photo with fewer pixels than the map has texels: one random chroma per
+    photo pixel, spread over its ``texels_a_pixel``² texels (the map's luminance stays smooth)."""
+    rng = np.random.default_rng(seed)
+    cells = -(-SIZE // texels_a_pixel)
+    noise = np.kron(rng.standard_normal((cells, cells, 3)), np.ones((texels_a_pixel, texels_a_pixel, 1)))[:SIZE, :SIZE]
+    albedo = _skin() * np.exp(0.04 * noise)
+    return albedo * (_skin() @ LUMINANCE / (albedo @ LUMINANCE))[..., None]
+
+
+def test_the_window_grows_to_the_photos_pixels_where_the_map_has_more_texels_than_the_photo():
+    """Colour noise one photo pixel wide, at 3 texels a pixel, survives a window of 2 texels but not one of two
+    pixels; the luminance is kept either way."""
+    noisy, seen, region = _pixel_noise(3), np.ones((SIZE, SIZE)), np.ones((SIZE, SIZE), bool)
+    config = ChromaConfig(radius=2 / SIZE, pixels=2.0)
+    texel_window = filter_chroma(noisy, seen, config)
+    pixel_window = filter_chroma(noisy, seen, config, texels_a_pixel=3.0)
+    assert colour_noise(pixel_window, region) < 0.5 * colour_noise(texel_window, region)
+    np.testing.assert_allclose(pixel_window @ LUMINANCE, noisy @ LUMINANCE, rtol=1e-6)
+
+
+def test_where_a_pixel_spans_fewer_texels_than_the_window_the_map_is_as_before():
+    noisy, seen = _pixel_noise(2), np.ones((SIZE, SIZE))
+    config = ChromaConfig()  # 2 texels at 256²: more than 2 pixels of half a texel
+    np.testing.assert_array_equal(filter_chroma(noisy, seen, config, texels_a_pixel=0.5),
+                                  filter_chroma(noisy, seen, config))
+
+
+def test_texels_per_pixel_reads_the_seen_texels_density():
+    """A pixel per 4 texels (area) is 2 texels across; texels seen less than half squarely do not count."""
+    density, weight = np.full((8, 8), 0.25), np.ones((8, 8))
+    density[:, :2], weight[:, :2] = 0.01, 0.2
+    assert texels_per_pixel(density, weight) == pytest.approx(2.0)
+    assert texels_per_pixel(density, np.zeros((8, 8))) == 0.0

@@ -187,7 +187,7 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
     seen = seen_texels(stage3.views, [rendered.face_region for rendered in renders])
     textures = stage3.textures
     if context.config.chroma.enabled:
-        textures = filtered_chroma(textures, seen, context.config.chroma)
+        textures = filtered_chroma(textures, seen, stage3.views, context.config.chroma)
     if context.config.completion.enabled:
         textures = complete_textures(context.model, textures, stage3.initial, seen, context.config.completion)
     return FinishedTextures(textures, seen, texture_confidence(stage3.views, renders))

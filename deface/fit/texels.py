@@ -15,7 +15,7 @@ import torch
 from deface.io.images import LUMINANCE
 from deface.models.uvmap import rasterize_uv
 from deface.render.mesh import Textures
-from deface.texture.chroma import ChromaConfig, filter_chroma
+from deface.texture.chroma import ChromaConfig, filter_chroma, texels_per_pixel
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
 from deface.texture.confidence import TexelView, combine_frames, texel_view
 
@@ -59,9 +59,13 @@ def seen_texels(views: list[TexelView], face_regions: list[torch.Tensor]) -> np.
     return np.max(np.stack(looks), 0)
 
 
-def filtered_chroma(textures: Textures, seen_map: np.ndarray, config: ChromaConfig) -> Textures:
-    """Stage 3's maps with the diffuse map's chroma guided by its luminance (deface/texture/chroma.py)."""
-    diffuse = filter_chroma(textures.diffuse.detach().numpy(), seen_map, config)
+def filtered_chroma(textures: Textures, seen_map: np.ndarray, views: list[TexelView],
+                    config: ChromaConfig) -> Textures:
+    """Stage 3's maps with the diffuse map's chroma guided by its luminance (deface/texture/chroma.py), its window
+    at least ``config.pixels`` of the frames' pixels wide (the best frame's at each texel)."""
+    density = np.max(np.stack([view.density for view in views]), 0)
+    diffuse = filter_chroma(textures.diffuse.detach().numpy(), seen_map, config,
+                            texels_per_pixel(density, seen_map))
     return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
 
 

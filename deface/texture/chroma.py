@@ -10,10 +10,15 @@ part of the chroma that is a linear function of the luminance and replaces the r
     c'(x) = mean_w(a) G(x) + mean_w(b),   a = cov(G, c) / (var(G) + eps),   b = mean(c) - a mean(G)
 
 with G = log Y (the guide: the map's luminance, left unchanged), c = log(X / Y) for X = R, G, B, windows of
-``radius`` texels, and every mean weighted by how squarely the photos saw each texel, so texels no photo showed
-(completion fills them next) do not bleed in. A mole (darker and browner) keeps its chroma, because it is darker;
-a chroma step at a mask's edge across even skin is averaged away. The luminance, where every fine detail of a beard,
-stubble or freckles lives, is exactly the fitted one.
+``radius`` of the map's side, and every mean weighted by how squarely the photos saw each texel, so texels no
+photo showed (completion fills them next) do not bleed in. A mole (darker and browner) keeps its chroma, because it
+is darker; a chroma step at a mask's edge across even skin is averaged away. The luminance, where every fine detail
+of a beard, stubble or freckles lives, is exactly the fitted one.
+
+The window is never finer than the photos' colour: a camera records colour at half its resolution (the colour
+filter array; JPEG's 4:2:0 sampling), so chroma that changes within about two pixels is not in a photo. Where the
+map has more texels than the photo has pixels (a small face, a large map, the benchmarks' 128-px working photos:
+2.7 texels a pixel at 256²), the window's half-side grows to ``pixels`` photo pixels in texels.
 """
 
 from __future__ import annotations
@@ -37,6 +42,11 @@ class ChromaConfig:
     deface-mean-skin): stage 3's map as it is."""
     radius: float = 0.008
     """Window half-side as a fraction of the map's side (4 texels at 512²): the scale of the colour noise removed."""
+    pixels: float = 2.0
+    """Least window half-side in the photos' pixels (the module doc: a photo's colour has half its resolution),
+    read in texels from how many texels a photo pixel spans on the face (:func:`texels_per_pixel`). At the
+    default's 512² maps of a 512-px crop a pixel spans about 1.8 texels, so ``radius`` decides there; with
+    fewer pixels per texel the window grows."""
     eps: float = 0.002
     """Regularisation of the guided filter, in (log luminance)²: a window whose luminance varies less than about
     sqrt(eps) (4 %) is treated as flat, its chroma set to the local mean."""
@@ -46,10 +56,24 @@ def _box(image: np.ndarray, size: int) -> np.ndarray:
     return ndimage.uniform_filter(image, size=(size, size) + (1,) * (image.ndim - 2), mode="nearest")
 
 
-def filter_chroma(diffuse: np.ndarray, weight: np.ndarray, config: ChromaConfig) -> np.ndarray:
+def texels_per_pixel(density: np.ndarray, weight: np.ndarray) -> float:
+    """How many texels one photo pixel spans across, at the median texel seen at least half squarely: 1 / sqrt of
+    the pixels per texel ``density`` [Ht, Wt] (the best frame's, foreshortening included); 0 when none is."""
+    seen = (weight >= 0.5) & (density > 0)
+    return float(np.median(1.0 / np.sqrt(density[seen]))) if seen.any() else 0.0
+
+
+def window_side(config: ChromaConfig, size: int, texels_a_pixel: float) -> int:
+    """The guided filter's window side in texels for a size² map (odd, at least 3)."""
+    return 2 * max(1, round(max(config.radius * size, config.pixels * texels_a_pixel))) + 1
+
+
+def filter_chroma(diffuse: np.ndarray, weight: np.ndarray, config: ChromaConfig,
+                  texels_a_pixel: float = 0.0) -> np.ndarray:
     """``diffuse`` [Ht, Wt, 3] linear, ``weight`` [Ht, Wt] >= 0 (how well each texel was seen) -> the map with its
-    chroma guided by its luminance; every texel's luminance unchanged (module doc)."""
-    size = 2 * max(1, round(config.radius * diffuse.shape[0])) + 1
+    chroma guided by its luminance; every texel's luminance unchanged (module doc). ``texels_a_pixel``: how many
+    texels a photo pixel spans (:func:`texels_per_pixel`; 0: the window is ``config.radius`` alone)."""
+    size = window_side(config, diffuse.shape[0], texels_a_pixel)
     rgb = np.maximum(diffuse.astype(np.float64), FLOOR)
     luminance = rgb @ np.asarray(LUMINANCE, np.float64)
     guide = np.log(luminance)
