@@ -375,3 +375,36 @@ def test_the_level_prior_can_read_the_light_the_renderer_renders():
     assert level_term(True, 0.4) == pytest.approx(expected, rel=0.1, abs=1e-3)
     assert level_term(True, rendered_level) < 0.01  # held where the rendered light is
     assert level_term(False, rendered_level) > 1.0  # the raw SH's level is far below it
+
+
+def test_the_colour_prior_can_read_the_light_the_renderer_renders():
+    """A light neutral at its raw SH peak can render coloured: here green and blue have a negative lobe towards the
+    camera, which the renderer clamps, so the face facing the camera gets more green and blue than red. The raw
+    colour term sees a white light; with ``tone.colour_as_rendered`` the term sees the cyan one, and the colour
+    spread over directions reads the same light."""
+    from types import SimpleNamespace
+
+    from deface.fit import rendering
+    from deface.fit.config import ToneConfig
+    from deface.render.renderer import RenderConfig, Renderer
+
+    light = torch.zeros(1, 81, 3)
+    light[0, 0] = 20.0
+    light[0, 2, 1:] = -20.0  # green and blue: radiance 20 (0.28 - 0.49 z), negative towards the camera
+
+    def context(as_rendered: bool, spread: float = 0.0):
+        return SimpleNamespace(
+            config=SimpleNamespace(tone=ToneConfig(colour_as_rendered=as_rendered),
+                                   weights=SimpleNamespace(light_colour_spread=spread)),
+            renderer=Renderer(RenderConfig()), kept_lights=light,
+            inputs=SimpleNamespace(scene_light=SimpleNamespace(illuminant=SimpleNamespace(white=np.ones(3)))))
+
+    raw, rendered = (float(rendering.scene_light_colour(context(as_rendered))) for as_rendered in (False, True))
+    assert raw < 0.01  # neutral at the raw peak (grazing normals)
+    assert rendered > 0.2  # its peak's chroma 2-3 % off white (the term is 1 at the prior's sigma, 5 %)
+    from deface.losses.illuminant import colour_spread, front_directions
+
+    for as_rendered in (False, True):
+        read = Renderer(RenderConfig()).rendered_lights(light) if as_rendered else light
+        assert float(rendering.light_colour_spread(context(as_rendered, 1.0))) == pytest.approx(
+            float(colour_spread(read, front_directions())), rel=1e-6)

@@ -165,7 +165,7 @@ class Weights:
     (:func:`deface.losses.illuminant.colour_spread`, the variance of its log-chromaticity over the front
     hemisphere). Free RGB SH coefficients let one light be neutral facing the camera and blue or yellow facing
     down; the map then takes the opposite colour where such a normal is (under the brows, along a mask's edge).
-    0 = off."""
+    It reads the lights as rendered with ``tone.colour_as_rendered``. 0 = off."""
     negative_radiance: float = 0.0
     """Stages 2 and 3: the kept lights' negative radiance beyond the ringing a sharp light needs
     (:func:`deface.losses.illuminant.negative_radiance_loss`). The renderer clamps what the fit makes negative, so
@@ -321,6 +321,12 @@ class ToneConfig:
     evade it: they hold the raw light near W and render one 1.6-2 times as bright through negative lobes, so the
     level is in effect free and the tone is the start's. Holding the rendered light keeps more of a beard on the
     renders of known albedo and costs the shadow pairs 0.7 dB (docs/skin-tone.md "The prior")."""
+    colour_as_rendered: bool = False
+    """Read the colour term's lights as the renderer renders them (negative radiance clamped,
+    ``render.non_negative_lights``) rather than their raw SH. The raw SH's colour can be the estimate's at each
+    light's peak while the clamped light the face is rendered with is another (a clean portrait's lights: neutral
+    raw, red over green 1.4-2.1 as rendered); the map then takes the opposite tint (a paler skin, teal brows).
+    The colour spread (``weights.light_colour_spread``) reads the same lights."""
     learning_rate: float = 0.0
     """Adam step of the tone in stage 2 (degrees of ITA); 0: the tone stays where it starts, the skin in the key
     light under the scene's white level (deface/fit/scene_light.py). 0, as the tone trades freely against the

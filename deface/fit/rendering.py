@@ -86,6 +86,7 @@ def scene_light_colour(context: StageContext) -> torch.Tensor:
     if not tone.scene_light_prior or light is None:
         return torch.zeros(())
     lights = context.kept_lights
+    lights = context.renderer.rendered_lights(lights) if tone.colour_as_rendered else lights
     return scene_light_colour_loss(lights, light.illuminant.white, tone.weight, tone.colour_sigma)
 
 
@@ -94,7 +95,9 @@ def light_colour_spread(context: StageContext) -> torch.Tensor:
     weight = context.config.weights.light_colour_spread
     if weight <= 0:
         return torch.zeros(())
-    return weight * colour_spread(context.kept_lights, front_directions())
+    lights = context.kept_lights
+    lights = context.renderer.rendered_lights(lights) if context.config.tone.colour_as_rendered else lights
+    return weight * colour_spread(lights, front_directions())
 
 
 def negative_radiance(context: StageContext) -> torch.Tensor:
