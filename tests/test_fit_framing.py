@@ -379,8 +379,18 @@ def test_a_bad_crop_or_size_setting_is_one_line(setting):
         set_from_text(presets.get("default"), setting)
 
 
-def test_a_photo_decoded_smaller_than_its_file_also_gets_the_file_s_camera(cropped_fit, tmp_path):
+@pytest.fixture(scope="module")
+def brief_cropped_fit(canvas):
+    """The fit of the canvas through the crop, a few steps long: what a fit writes of its camera."""
+    brief = _config(**{"iterations.stage1": 10, "iterations.stage2": 2, "iterations.stage3": 1,
+                       "decouple.ace_iteration": 1, "render.shadow_rays": 4})
+    return fit_target(frame_target([canvas.image], [canvas.landmarks], brief), brief, log=FitLog(quiet=True))
+
+
+def test_a_photo_decoded_smaller_than_its_file_also_gets_the_file_s_camera(brief_cropped_fit, tmp_path):
     from deface.export.outputs import _camera
+
+    cropped_fit = brief_cropped_fit
     from deface.io.images import image_size
 
     camera = _camera(cropped_fit, [CANVAS[0] * 4, CANVAS[1] * 4])
