@@ -80,14 +80,20 @@ def photometric(context: StageContext, frame: int, rendered: FrameRender) -> tor
                             clipped=context.target.clipped[frame] if config.decouple.clipped_as_bound else None)
 
 
+def kept_lights_read(context: StageContext, as_rendered: bool) -> torch.Tensor:
+    """[K, B*B, 3] the kept lights as a light prior reads them: as the renderer renders them (negative radiance
+    clamped, ``render.non_negative_lights``) or as their raw SH."""
+    lights = context.kept_lights
+    return context.renderer.rendered_lights(lights) if as_rendered else lights
+
+
 def scene_light_colour(context: StageContext) -> torch.Tensor:
     """The scene-light colour term of the kept lights (0 when off or without an estimate)."""
     tone, light = context.config.tone, context.inputs.scene_light
     if not tone.scene_light_prior or light is None:
         return torch.zeros(())
-    lights = context.kept_lights
-    lights = context.renderer.rendered_lights(lights) if tone.colour_as_rendered else lights
-    return scene_light_colour_loss(lights, light.illuminant.white, tone.weight, tone.colour_sigma)
+    return scene_light_colour_loss(kept_lights_read(context, tone.colour_as_rendered), light.illuminant.white,
+                                   tone.weight, tone.colour_sigma)
 
 
 def light_colour_spread(context: StageContext) -> torch.Tensor:
@@ -95,9 +101,8 @@ def light_colour_spread(context: StageContext) -> torch.Tensor:
     weight = context.config.weights.light_colour_spread
     if weight <= 0:
         return torch.zeros(())
-    lights = context.kept_lights
-    lights = context.renderer.rendered_lights(lights) if context.config.tone.colour_as_rendered else lights
-    return weight * colour_spread(lights, front_directions())
+    return weight * colour_spread(kept_lights_read(context, context.config.tone.colour_as_rendered),
+                                  front_directions())
 
 
 def negative_radiance(context: StageContext) -> torch.Tensor:
@@ -122,7 +127,5 @@ def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) 
     tone, light = context.config.tone, context.inputs.scene_light
     if not tone.scene_light_prior or light is None or light.regions is None or rendered.normals is None:
         return torch.zeros(())
-    lights = context.kept_lights
-    lights = context.renderer.rendered_lights(lights) if tone.level_as_rendered else lights
-    return scene_light_level_loss(lights, rendered.normals, light.regions[frame], light.illuminant.white,
-                                  tone.weight, tone.exposure_sigma)
+    return scene_light_level_loss(kept_lights_read(context, tone.level_as_rendered), rendered.normals,
+                                  light.regions[frame], light.illuminant.white, tone.weight, tone.exposure_sigma)

@@ -63,7 +63,7 @@ def filtered_chroma(textures: Textures, seen_map: np.ndarray, views: list[TexelV
                     config: ChromaConfig) -> Textures:
     """Stage 3's maps with the diffuse map's chroma guided by its luminance (deface/texture/chroma.py), its window
     at least ``config.pixels`` of the frames' pixels wide (the best frame's at each texel)."""
-    density = np.max(np.stack([view.density for view in views]), 0)
+    density = np.max([view.density for view in views], axis=0)
     diffuse = filter_chroma(textures.diffuse.detach().numpy(), seen_map, config,
                             texels_per_pixel(density, seen_map))
     return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
