@@ -9,7 +9,7 @@ import pytest
 
 from deface.eval.albedo_measures import colour_noise
 from deface.io.images import LUMINANCE
-from deface.texture.chroma import ChromaConfig, filter_chroma, texels_per_pixel
+from deface.texture.chroma import ChromaConfig, filter_chroma, skin_chroma_gain, texels_per_pixel
 
 SIZE = 256
 SKIN = np.array([0.55, 0.38, 0.30])
@@ -134,3 +134,20 @@ def test_texels_per_pixel_reads_the_seen_texels_density():
     density[:, :2], weight[:, :2] = 0.01, 0.2
     assert texels_per_pixel(density, weight) == pytest.approx(2.0)
     assert texels_per_pixel(density, np.zeros((8, 8))) == 0.0
+
+
+def test_the_skin_chroma_gain_gives_the_skin_the_readings_chroma_and_keeps_everything_else():
+    """The map's median skin takes the reading's chroma at its own luminance; every texel is scaled by the same
+    gain, so each texel's chroma relative to the skin (a mole, a brow) and the skin's luminance are kept."""
+    albedo, mole = _mole(_skin(seed=3, noise=0.02))
+    reading = np.array([0.62, 0.36, 0.22])  # a warmer skin than the map's, at another level
+    everywhere = np.ones(albedo.shape[:2], bool)
+    gain = skin_chroma_gain(albedo, everywhere, reading)
+    matched = albedo * gain
+    median, after = np.median(albedo.reshape(-1, 3), 0), np.median(matched.reshape(-1, 3), 0)
+    np.testing.assert_allclose(_chroma(after[None, None])[0, 0], _chroma(reading[None, None])[0, 0], atol=0.02)
+    assert after @ LUMINANCE == pytest.approx(median @ LUMINANCE, rel=0.02)
+    relative = _chroma(albedo) - _chroma(albedo).mean((0, 1))
+    np.testing.assert_allclose(_chroma(matched) - _chroma(matched).mean((0, 1)), relative, atol=1e-9)
+    assert skin_chroma_gain(albedo, np.zeros_like(everywhere), reading) is None  # no skin seen: no reading
+    assert mole.any()

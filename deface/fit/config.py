@@ -327,6 +327,13 @@ class ToneConfig:
     light's peak while the clamped light the face is rendered with is another (a clean portrait's lights: neutral
     raw, red over green 1.4-2.1 as rendered); the map then takes the opposite tint (a paler skin, teal brows).
     The colour spread (``weights.light_colour_spread``) reads the same lights."""
+    skin_chroma: bool = False
+    """After stage 3, give the maps' skin the chroma of the skin in the key light over the scene's white level
+    (the tone's start reading, deface/fit/scene_light.py), and the lights the inverse per channel, so every render
+    is unchanged (deface/fit/texels.py :func:`skin_chroma_matched`). Light colour and skin colour trade freely in
+    L_pho; the colour term that should settle it reads each light's raw SH at its peak, which the renderer's
+    clamp evades (the clean portraits' lights render the skin 1.4-2.1 times redder than a neutral light, and
+    the maps come out pale, their brows teal). Luminance and every fine chroma difference are kept."""
     learning_rate: float = 0.0
     """Adam step of the tone in stage 2 (degrees of ITA); 0: the tone stays where it starts, the skin in the key
     light under the scene's white level (deface/fit/scene_light.py). 0, as the tone trades freely against the

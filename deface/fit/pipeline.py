@@ -31,7 +31,7 @@ from deface.fit.stage2 import Stage2Result, run_stage2
 from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
 from deface.fit.target import FitTarget, frame_target
-from deface.fit.texels import complete_textures, filtered_chroma, seen_texels, texture_confidence
+from deface.fit.texels import complete_textures, filtered_chroma, seen_texels, skin_chroma_matched, texture_confidence
 from deface.fit.texture_size import choose_texture_size
 from deface.fit.tone_start import initial_tone, log_tone, supported_tone
 from deface.landmarks.correspondence import correspondence_for
@@ -190,6 +190,12 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
         textures = filtered_chroma(textures, seen, stage3.views, context.config.chroma)
     if context.config.completion.enabled:
         textures = complete_textures(context.model, textures, stage3.initial, seen, context.config.completion)
+    light = context.inputs.scene_light
+    if context.config.tone.skin_chroma and light is not None and light.skin is not None:
+        textures, gain = skin_chroma_matched(context.model, textures, seen, light.skin, context.scene.lights)
+        if gain is not None:
+            context.log.info(f"the map's skin takes the photo's skin chroma (gain {np.round(gain, 3).tolist()}); "
+                             "the lights the inverse")
     return FinishedTextures(textures, seen, texture_confidence(stage3.views, renders))
 
 

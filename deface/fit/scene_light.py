@@ -275,9 +275,10 @@ def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant
     with torch.no_grad():
         scene.lights.copy_(lights_scaled_to_white(scene.lights, white))
     kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= MIN_PIXELS else None
+    skin = None if grayscale(pixels.srgb) else lit_skin_albedo(pixels, white)
     if config.tone.free_tone:
-        _start_tone(face, pixels, white, config, log)
-    return SceneLight(illuminant, kept)
+        _start_tone(face, pixels, skin, config, log)
+    return SceneLight(illuminant, kept, skin)
 
 
 def facing_illuminant(illuminant: IlluminantEstimate, pixels: SkinPixels, settings, log) -> IlluminantEstimate:
@@ -298,13 +299,13 @@ def facing_illuminant(illuminant: IlluminantEstimate, pixels: SkinPixels, settin
     return corrected
 
 
-def _start_tone(face, pixels: SkinPixels, white: np.ndarray, config, log) -> None:
-    """Set ``face.scene.tone`` from the skin in the key light, or say in the log why it keeps the model's."""
+def _start_tone(face, pixels: SkinPixels, albedo: np.ndarray | None, config, log) -> None:
+    """Set ``face.scene.tone`` from the skin in the key light ``albedo`` (:func:`lit_skin_albedo`), or say in the
+    log why it keeps the model's."""
     keeps = f"the tone stays at the model's mean skin (ITA {float(face.scene.tone.detach()):.1f})"
     if grayscale(pixels.srgb):
         log.info(f"a grayscale photo does not show skin tone: {keeps}")
         return
-    albedo = lit_skin_albedo(pixels, white)
     if albedo is None:
         log.info(f"too little lit skin to read the skin tone from: {keeps}")
         return

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from deface.decouple.compose import compose_face
@@ -60,6 +61,7 @@ class SceneLight:
 
     illuminant: IlluminantEstimate  # white level and colour temperature read off the photo
     regions: tuple[torch.Tensor, ...] | None  # T x [H, W] bool cheek/forehead skin (None: too little skin)
+    skin: np.ndarray | None = None  # [3] linear RGB: the skin in the key light over W (None: not read)
 
 
 @dataclass(frozen=True)

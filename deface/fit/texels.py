@@ -15,7 +15,7 @@ import torch
 from deface.io.images import LUMINANCE
 from deface.models.uvmap import rasterize_uv
 from deface.render.mesh import Textures
-from deface.texture.chroma import ChromaConfig, filter_chroma, texels_per_pixel
+from deface.texture.chroma import ChromaConfig, filter_chroma, skin_chroma_gain, texels_per_pixel
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
 from deface.texture.confidence import TexelView, combine_frames, texel_view
 
@@ -67,6 +67,26 @@ def filtered_chroma(textures: Textures, seen_map: np.ndarray, views: list[TexelV
     diffuse = filter_chroma(textures.diffuse.detach().numpy(), seen_map, config,
                             texels_per_pixel(density, seen_map))
     return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
+
+
+SKIN_SEEN = 0.5
+"""The texels whose colour the skin's chroma is read from: seen at least this squarely (completion's ``seen_full``)."""
+
+
+def skin_chroma_matched(model, textures: Textures, seen_map: np.ndarray, skin: np.ndarray,
+                        lights: torch.Tensor) -> tuple[Textures, np.ndarray | None]:
+    """The maps with the skin's chroma of ``skin`` [3] (:func:`~deface.texture.chroma.skin_chroma_gain` over the
+    texels seen at least ``SKIN_SEEN`` squarely, the lips left out), and the gain [3]; ``lights`` [n, B*B, 3] are
+    divided by it in place, so every render is unchanged (diffuse and specular both multiply the light). Gain None:
+    too little skin seen, nothing changed."""
+    regions = layout_regions(model, seen_map.shape[0])
+    texels = (seen_map >= SKIN_SEEN) & regions.face & ~regions.lips
+    gain = skin_chroma_gain(textures.diffuse.detach().numpy(), texels, skin)
+    if gain is None:
+        return textures, None
+    factor = torch.as_tensor(gain, dtype=textures.diffuse.dtype)
+    lights.div_(factor.to(lights.dtype))
+    return Textures((textures.diffuse * factor).clamp(0, 1), textures.specular * factor, textures.roughness), gain
 
 
 def complete_textures(model, textures: Textures, initial: Textures, seen_map: np.ndarray,

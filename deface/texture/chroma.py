@@ -68,6 +68,21 @@ def window_side(config: ChromaConfig, size: int, texels_a_pixel: float) -> int:
     return 2 * max(1, round(max(config.radius * size, config.pixels * texels_a_pixel))) + 1
 
 
+MIN_SKIN = 200  # fewer trusted skin texels than this: the skin's chroma is not read off the map
+
+
+def skin_chroma_gain(diffuse: np.ndarray, skin_texels: np.ndarray, skin: np.ndarray) -> np.ndarray | None:
+    """[3] the per-channel gain that gives the map's skin (the median colour of ``diffuse`` [Ht, Wt, 3] over
+    ``skin_texels`` [Ht, Wt] bool) the chroma of ``skin`` [3] (linear RGB) at the map's own luminance; None with
+    fewer than ``MIN_SKIN`` texels."""
+    if skin_texels.sum() < MIN_SKIN:
+        return None
+    median = np.maximum(np.median(diffuse[skin_texels].astype(np.float64), axis=0), FLOOR)
+    gain = np.maximum(np.asarray(skin, np.float64), FLOOR) / median
+    luminance = np.asarray(LUMINANCE, np.float64)
+    return gain * (median @ luminance) / ((median * gain) @ luminance)
+
+
 def filter_chroma(diffuse: np.ndarray, weight: np.ndarray, config: ChromaConfig,
                   texels_a_pixel: float = 0.0) -> np.ndarray:
     """``diffuse`` [Ht, Wt, 3] linear, ``weight`` [Ht, Wt] >= 0 (how well each texel was seen) -> the map with its
