@@ -275,7 +275,8 @@ def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant
     with torch.no_grad():
         scene.lights.copy_(lights_scaled_to_white(scene.lights, white))
     kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= MIN_PIXELS else None
-    skin = None if grayscale(pixels.srgb) else lit_skin_albedo(pixels, white)
+    read = (config.tone.free_tone or config.tone.skin_chroma) and not grayscale(pixels.srgb)
+    skin = lit_skin_albedo(pixels, white) if read else None
     if config.tone.free_tone:
         _start_tone(face, pixels, skin, config, log)
     return SceneLight(illuminant, kept, skin)
