@@ -389,9 +389,9 @@ def brief_cropped_fit(canvas):
 
 def test_a_photo_decoded_smaller_than_its_file_also_gets_the_file_s_camera(brief_cropped_fit, tmp_path):
     from deface.export.outputs import _camera
+    from deface.io.images import image_size
 
     cropped_fit = brief_cropped_fit
-    from deface.io.images import image_size
 
     camera = _camera(cropped_fit, [CANVAS[0] * 4, CANVAS[1] * 4])
     assert camera["file"]["focal_px"] == pytest.approx(4 * camera["focal_px"])

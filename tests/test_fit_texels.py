@@ -32,16 +32,17 @@ def _lights() -> torch.Tensor:
     return light
 
 
-def _render(textures: Textures, lights: torch.Tensor) -> torch.Tensor:
+def _render(textures: Textures, light: torch.Tensor) -> torch.Tensor:
+    """The plane under one light [1, 9, 3]."""
     camera = Camera(torch.tensor(110.0, dtype=torch.float64), torch.tensor([math.pi, 0.0, 0.0], dtype=torch.float64),
                     torch.tensor([0.0, 0.0, 5.0], dtype=torch.float64), 48, 48)
     renderer = Renderer(RenderConfig(shadows=False, specular=True))
-    return render_frame(renderer, grid_plane((-1, 1), (-1, 1), cells=4), camera, textures, lights[:1]).images
+    return render_frame(renderer, grid_plane((-1, 1), (-1, 1), cells=4), camera, textures, light).images
 
 
 def test_the_skin_takes_the_readings_chroma_and_every_render_is_unchanged(shared):
     textures, lights = _maps(np.random.default_rng(0)), _lights()
-    before = [_render(textures, lights[k:]) for k in range(2)]
+    before = [_render(textures, lights[k:k + 1]) for k in range(2)]
     reading = np.array([0.60, 0.34, 0.22])
     seen = np.ones((SIZE, SIZE))
     matched, gain = skin_chroma_matched(load_ict(), textures, seen, reading, lights)
@@ -50,7 +51,7 @@ def test_the_skin_takes_the_readings_chroma_and_every_render_is_unchanged(shared
     np.testing.assert_allclose(skin / skin[1], reading / reading[1], rtol=0.03)
     torch.testing.assert_close(lights, _lights() / torch.as_tensor(gain))  # divided in place
     for k in range(2):  # each light alone: the diffuse and the specular terms both unchanged
-        torch.testing.assert_close(_render(matched, lights[k:]), before[k], rtol=1e-9, atol=1e-9)
+        torch.testing.assert_close(_render(matched, lights[k:k + 1]), before[k], rtol=1e-9, atol=1e-9)
 
 
 def test_with_no_skin_seen_nothing_changes(shared):

@@ -79,8 +79,7 @@ def skin_chroma_matched(model, textures: Textures, seen_map: np.ndarray, skin: n
     texels seen at least ``SKIN_SEEN`` squarely, the lips left out), and the gain [3]; ``lights`` [n, B*B, 3] are
     divided by it in place, so every render is unchanged (diffuse and specular both multiply the light). Gain None:
     too little skin seen, nothing changed."""
-    regions = layout_regions(model, seen_map.shape[0])
-    texels = (seen_map >= SKIN_SEEN) & regions.face & ~regions.lips
+    texels = (seen_map >= SKIN_SEEN) & layout_regions(model, seen_map.shape[0]).skin
     gain = skin_chroma_gain(textures.diffuse.detach().numpy(), texels, skin)
     if gain is None:
         return textures, None

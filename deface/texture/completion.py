@@ -52,6 +52,11 @@ class CompletionRegions:
     cavity: np.ndarray  # inside the lips and facing into the mouth (the lips' inner rolls)
     symmetric: bool  # the layout is symmetric in u (mirroring is meaningful)
 
+    @property
+    def skin(self) -> np.ndarray:
+        """[Ht, Wt] bool: the layout's skin, the face less the lips (where the person's skin colour is read)."""
+        return self.face & ~self.lips
+
 
 def trust_map(seen: np.ndarray, config: CompletionConfig) -> np.ndarray:
     """[Ht, Wt] in [0, 1]: how much of a texel's fitted value is kept."""
@@ -80,8 +85,7 @@ def complete_map(texture: np.ndarray, prior: np.ndarray, seen: np.ndarray, regio
     trust = trust_map(seen, config)
     if config.mirror and regions.symmetric:
         texture, trust = mirror_fill(texture, trust)
-    skin = regions.face & ~regions.lips
-    gain = skin_gain(texture, prior, trust, skin)
+    gain = skin_gain(texture, prior, trust, regions.skin)
     fill = prior * gain
     if cavity:
         lip_colour = _lip_colour(texture, prior * gain, trust, regions.lips & ~regions.cavity)
