@@ -7,7 +7,6 @@ import shutil
 
 import pytest
 
-from deface.eval import identity
 from deface.eval.benchmark import (
     TABLES,
     VARIANTS,
@@ -16,6 +15,7 @@ from deface.eval.benchmark import (
     update_benchmarks_md,
     variant_config,
 )
+from deface.landmarks import identity
 
 
 def test_every_table_row_names_a_variant():

@@ -11,8 +11,9 @@ from skimage.filters import gaussian
 
 from deface.batch.resume import config_record
 from deface.eval.benchmark import VARIANTS, report_markdown, variant_config
-from deface.eval.identity import SAME_PERSON_DISTANCE, IdentityScorer, identity_scores
+from deface.eval.identity import identity_scores
 from deface.eval.report import PairScores, ReportRow, write_index_html, write_metrics_json
+from deface.landmarks.identity import SAME_PERSON_DISTANCE, IdentityScorer
 
 
 @pytest.fixture(scope="module")

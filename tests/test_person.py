@@ -10,10 +10,22 @@ from typer.testing import CliRunner
 
 from deface.cli.main import app
 from deface.fit.config import FitConfig
-from deface.fit.person import PhotoCrop, crop_landmarks, cut_square, person_target, square_box, working_side
+from deface.fit.log import FitLog
+from deface.fit.person import (
+    PhotoCrop,
+    crop_landmarks,
+    cut_square,
+    one_person,
+    person_target,
+    photos_of_one_person,
+    square_box,
+    working_side,
+)
 from deface.io.images import InputError
 from deface.io.inputs import InputItem, person_input
 from deface.landmarks.detect import Landmarks
+from deface.landmarks.identity import SamePersonConfig
+from deface.landmarks.identity import available as identity_available
 
 
 def _dot_photo(width: int, height: int, at: tuple[float, float]) -> np.ndarray:
@@ -93,10 +105,62 @@ def test_a_person_input_takes_photos_and_a_plain_name(tmp_path):
         person_input("ada", [*photos, InputItem(tmp_path / "c.mp4", "video")])
 
 
+def test_the_person_is_the_photos_most_others_are_close_to():
+    close, far = 0.3, 0.9
+    three = np.array([[0, far, close], [far, 0, far], [close, far, 0]])  # photos 0 and 2 alike, 1 someone else
+    assert one_person(three, 0.7) == (0, [1])
+    assert one_person(np.array([[0, far], [far, 0]]), 0.7) == (0, [1])  # two people: the first given is the person
+    assert one_person(np.full((4, 4), close) - np.eye(4) * close, 0.7) == (0, [])
+    majority = np.array([[0, far, far], [far, 0, close], [far, close, 0]])  # the first photo is the odd one out
+    assert one_person(majority, 0.7) == (1, [0])
+
+
+class _Said(FitLog):
+    def __init__(self):
+        super().__init__(quiet=True)
+        self.said = []
+
+    def info(self, message: str) -> None:
+        self.said.append(message)
+
+
+def test_a_photo_of_another_person_is_left_out_in_one_line():
+    """Two photos of Obama and one of Biden (benchmarks/board/photos, SOURCES.md there): Biden's is left out and
+    said; with the check off all three stay."""
+    pytest.importorskip("dlib")
+    from pathlib import Path
+
+    from deface.io.images import load_image
+    from deface.landmarks.detect import detect_landmarks
+
+    folder = Path(__file__).parents[1] / "benchmarks" / "board" / "photos"
+    photos = []
+    for name in ("obama.jpg", "biden.jpg", "obama_speech.jpg"):
+        image = load_image(folder / name)
+        photos.append((image, detect_landmarks(image), name))
+    log = _Said()
+    kept = photos_of_one_person(photos, SamePersonConfig(), log)
+    assert [name for *_, name in kept] == ["obama.jpg", "obama_speech.jpg"]
+    assert len(log.said) == 1 and log.said[0].startswith("biden.jpg: another person's face than in obama.jpg")
+    assert photos_of_one_person(photos, SamePersonConfig(enabled=False), log) == photos
+
+
+def test_without_dlib_the_photos_are_kept_and_the_fit_says_they_were_not_checked(monkeypatch):
+    from deface.landmarks import identity
+
+    monkeypatch.setattr(identity, "unavailable_reason", lambda: "dlib is not installed")
+    photos = [(np.zeros((8, 8, 3)), None, name) for name in "ab"]
+    log = _Said()
+    assert photos_of_one_person(photos, SamePersonConfig(), log) == photos
+    assert log.said == ["the photos are not checked for another person's face: dlib is not installed"]
+    with pytest.raises(ValueError, match="same_person.distance"):
+        SamePersonConfig(distance=0)
+
+
 @pytest.mark.slow
-def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, tmp_path):
-    """Two renders of one albedo and a blank photo: one fit of the two, the blank one said and recorded; the fit
-    reloads and relights."""
+def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, photos, tmp_path):
+    """Two renders of one albedo, a blank photo and another person's photo: one fit of the two, the blank one and
+    the other person's said and recorded; the fit reloads and relights."""
     from PIL import Image
 
     from deface.eval.benchmark import SCHEDULES
@@ -104,8 +168,9 @@ def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, tmp_pa
 
     images = shared / "data" / "detail-synth" / "images"
     Image.new("RGB", (200, 150), (128, 128, 128)).save(tmp_path / "blank.png")
+    other = [str(photos / "nextface-s5.png")] if identity_available() else []  # told apart by dlib's descriptor
     args = ["fit", "--person", "ada", str(images / "ita30_even.png"), str(images / "ita30_key.png"),
-            str(tmp_path / "blank.png"), "-o", str(tmp_path / "out")]
+            str(tmp_path / "blank.png"), *other, "-o", str(tmp_path / "out")]
     args += [f"--set={path}={value}" for path, value in SCHEDULES["smoke"].items()]
     args += ["--set=registration.enabled=true"]  # the photos' UVs brought into register, written and reloaded
     result = CliRunner().invoke(app, args)
@@ -116,7 +181,8 @@ def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, tmp_pa
     record = params["input"]
     assert record["kind"] == "person" and [p["path"] for p in record["photos"]] == [
         str(images / "ita30_even.png"), str(images / "ita30_key.png")]
-    assert record["left_out"] == [str(tmp_path / "blank.png")]
+    assert record["left_out"] == [str(tmp_path / "blank.png"), *other]
+    assert ("another person's face" in result.output) == bool(other)
     side = params["camera"]["width"]
     assert params["camera"]["principal_point"] == [side / 2, side / 2] and "input.photos" in params["camera"]["pixels"]
     for photo in record["photos"]:  # each frame's camera in its photo's pixels: the working focal x square / side

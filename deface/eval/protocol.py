@@ -3,7 +3,7 @@ geometry, pose and lights but the source's textures ("target synthesis"), and sc
 reconstruction and the target synthesis against the photos, over the face region h (our stand-in for
 the authors' face parsing) and over the full image composited as the authors did. When dlib is installed
 (``.[identity]``), each side also gets ``"identity": {"distance": d}``: the dlib descriptor distance between
-that full composite and the photo (:mod:`deface.eval.identity`; lower is better, < 0.6 = same person).
+that full composite and the photo (:mod:`deface.landmarks.identity`; lower is better, < 0.6 = same person).
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from deface.eval import identity
 from deface.eval.albedo_measures import colour_noise
+from deface.eval.identity import identity_scores
 from deface.eval.metrics import composite, mean_scores, score_images
 from deface.eval.pairs import Pair
 from deface.eval.report import PairScores, ReportRow
@@ -26,6 +26,7 @@ from deface.fit.log import FitLog
 from deface.fit.output import FitOutput
 from deface.fit.pipeline import fit
 from deface.io.images import linear_to_srgb, load_image, save_png
+from deface.landmarks import identity
 from deface.models.ita import texture_ita
 from deface.relight.transfer import transfer_renders
 from deface.texture.confidence import unwrap
@@ -62,7 +63,7 @@ def score_fit(result: FitOutput, renders: list | None = None) -> tuple[dict, lis
         outputs.append(_np(result.composite(rendered, frame)))
     mean = mean_scores(scores)
     if identity.available():
-        found = identity.identity_scores(_IDENTITY, pasted, photos)
+        found = identity_scores(_IDENTITY, pasted, photos)
         if found is not None:
             mean["identity"] = found
     return mean, outputs

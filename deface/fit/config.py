@@ -23,6 +23,7 @@ from deface.fit.config_values import (
     split_assignment,
     to_dict,
 )
+from deface.landmarks.identity import SamePersonConfig
 from deface.models.albedo_prior import AlbedoPriorConfig
 from deface.models.registry import TONE_AXIS
 from deface.priors.face_region import SkinClassifierConfig
@@ -464,6 +465,8 @@ class FitConfig:
     texel, so no texel is freer than the photos make it."""
     completion: CompletionConfig = field(default_factory=CompletionConfig)
     """Filling the texels no frame showed, after stage 3 (deface/texture/completion.py)."""
+    same_person: SamePersonConfig = field(default_factory=SamePersonConfig)
+    """Several photos of one person: a photo of another person left out (deface/landmarks/identity.py)."""
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     """The frames of several photos or a clip brought into register in UV before stage 3
     (deface/texture/registration.py)."""

@@ -18,8 +18,11 @@ import cv2
 import numpy as np
 
 from deface.fit.config import FitConfig
+from deface.fit.log import FitLog
 from deface.fit.target import FitTarget
+from deface.landmarks import identity
 from deface.landmarks.detect import Landmarks
+from deface.landmarks.identity import SamePersonConfig
 
 
 @dataclass(frozen=True)
@@ -108,3 +111,32 @@ def person_target(photos: list[np.ndarray], landmarks: list[Landmarks], sources:
     working = [crop_landmarks(found, crop.box, side) for found, crop in zip(landmarks, crops, strict=True)]
     scale = side / float(np.median([crop.side for crop in crops]))
     return FitTarget(frames, working, scale, light_groups=tuple(range(len(frames)))), crops
+
+
+def one_person(distances: np.ndarray, limit: float) -> tuple[int, list[int]]:
+    """(the reference photo, the photos of another person) from the identity distances [n, n] between n photos'
+    faces: the reference is the photo within ``limit`` of the most others (the first of those tied, so with two
+    photos of different people the first given); a photo farther than ``limit`` from it is another person's."""
+    reference = int(np.argmax((distances <= limit).sum(1)))  # argmax: the first of a tie
+    return reference, [i for i in range(len(distances)) if distances[reference, i] > limit]
+
+
+def photos_of_one_person(photos: list[tuple[np.ndarray, Landmarks, str]], settings: SamePersonConfig,
+                         log: FitLog) -> list[tuple[np.ndarray, Landmarks, str]]:
+    """``photos`` (photo, its landmarks, its source) less those of another person (:func:`one_person` on dlib's
+    descriptors), each said in one line; all of them when the check is off, there are fewer than two, or dlib is
+    not installed (said)."""
+    if not settings.enabled or len(photos) < 2:
+        return photos
+    reason = identity.unavailable_reason()
+    if reason is not None:
+        log.info(f"the photos are not checked for another person's face: {reason}")
+        return photos
+    scorer = identity.IdentityScorer()
+    descriptors = np.stack([scorer.descriptor_of_face(photo, found.points) for photo, found, _ in photos])
+    distances = np.linalg.norm(descriptors[:, None] - descriptors[None], axis=-1)
+    reference, others = one_person(distances, settings.distance)
+    for index in others:
+        log.info(f"{photos[index][2]}: another person's face than in {photos[reference][2]} (identity distance "
+                 f"{distances[reference, index]:.2f} > {settings.distance}); left out of the fit")
+    return [photo for index, photo in enumerate(photos) if index not in others]

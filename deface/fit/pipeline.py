@@ -22,7 +22,7 @@ from deface.fit.decoupling import Decoupling
 from deface.fit.face_region import face_classifier
 from deface.fit.log import FitLog
 from deface.fit.output import FinishedTextures, FitOutput, RunRecord
-from deface.fit.person import PhotoCrop, person_target
+from deface.fit.person import PhotoCrop, person_target, photos_of_one_person
 from deface.fit.scene import SceneParameters, initial_lights
 from deface.fit.scene_light import start_from_scene
 from deface.fit.scene_white import scene_illuminant
@@ -99,8 +99,9 @@ def fit(frames: list[np.ndarray], config: FitConfig, *, models_dir=None, source:
 def fit_photos(photos: list[np.ndarray], sources: list[str], config: FitConfig, *, models_dir=None,
                log: FitLog | None = None, landmarks: list | None = None) -> tuple[FitOutput, list[PhotoCrop]]:
     """One fit of several photos of one person (sRGB [H, W, 3] of any sizes; deface/fit/person.py): a photo without
-    a face is left out, said in one line; :class:`NoFaceError` when none has one. ``landmarks``: per photo, those
-    already found on it, or None. Returns the fit and where each kept photo's working frame lies in it."""
+    a face, or with another person's (:func:`~deface.fit.person.photos_of_one_person`), is left out, said in one
+    line; :class:`NoFaceError` when none has a face. ``landmarks``: per photo, those already found on it, or None.
+    Returns the fit and where each kept photo's working frame lies in it."""
     log = log or FitLog(name=sources[0])
     log.start("landmarks")
     found = landmarks or [None] * len(photos)
@@ -114,6 +115,7 @@ def fit_photos(photos: list[np.ndarray], sources: list[str], config: FitConfig, 
         kept.append((photo, points, source))
     if not kept:
         raise NoFaceError(f"none of the {len(photos)} photos has a face")
+    kept = photos_of_one_person(kept, config.same_person, log)
     target, crops = person_target(*(list(column) for column in zip(*kept, strict=True)), config)
     log.info(f"{len(kept)} photos, each cut to the square around its face at {target.size[0]} pixels")
     log.stop("landmarks")
