@@ -124,6 +124,7 @@ class _Said(FitLog):
         self.said.append(message)
 
 
+@pytest.mark.slow  # MediaPipe and dlib on three photos: about 5 s
 def test_a_photo_of_another_person_is_left_out_in_one_line():
     """Two photos of Obama and one of Biden (benchmarks/board/photos, SOURCES.md there): Biden's is left out and
     said; with the check off all three stay."""
