@@ -7,15 +7,16 @@ when it is below 0.6 (99.38% on LFW). On the shared photos of 16 different peopl
 distance is 0.61, the median 0.83.
 
 Small images: the HOG detector needs a face of about 80 px, and the benchmark's working images are 128 px
-(faces of 40-100 px), so both images are upscaled (bicubic) to at least :data:`MIN_SIDE` px on their longer
-side before detection: of the 16 benchmark photos shrunk to 128 px, it finds all, the raw detector 11.
+(faces of 40-100 px), so both images are upscaled (bicubic) to at least ``MIN_SIDE`` px
+(deface/landmarks/identity.py) on their longer side before detection: of the 16 benchmark photos shrunk to
+128 px, it finds all, the raw detector 11.
 Shrinking a photo to 128 px alone moves its descriptor by 0.04-0.20 (the floor of this score at that size).
 When no face is found in the synthesis, the photo's face box is used for it too (the two are pixel-aligned:
 the synthesis is the photo's own camera re-rendered); when the photo has no face, there is no score.
 
 Optional dependency: ``pip install -e ".[identity]"`` (``dlib-bin`` and ``face-recognition-models``, which
-ships the model files). :func:`available` says whether they are there; callers leave the column out
-otherwise, never fill it in.
+ships the model files). :func:`deface.landmarks.identity.available` says whether they are there; callers leave
+the column out otherwise, never fill it in.
 """
 
 from __future__ import annotations

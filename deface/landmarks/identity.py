@@ -85,7 +85,7 @@ class IdentityScorer:
         if self._models is None:
             reason = unavailable_reason()
             if reason is not None:
-                raise RuntimeError(f"identity scores unavailable: {reason}")
+                raise RuntimeError(f"dlib's face descriptor is unavailable: {reason}")
             import dlib
 
             folder = model_dir()
