@@ -193,8 +193,10 @@ def test_fit_person_leaves_out_a_photo_without_a_face_and_reloads(shared, photos
     for frame, photo in (("000", "report/input.png"), ("001", "report/input_001.png")):
         assert (folder / "frames" / frame / "render.png").is_file() and (folder / photo).is_file()
         assert f"frames/{frame}/render.png" in page and photo in page  # every photo beside its fit
+    per_photo = params["illuminant"]["per_photo"]  # each photo's own white level (tone.white_per_photo)
+    assert len(per_photo) == 2 and params["illuminant"]["white"] == per_photo[0]["white"]
     fit = load_fit(folder)
-    assert len(fit.frames) == 2
+    assert len(fit.frames) == 2 and [e.record() for e in fit.photo_illuminants] == per_photo
     relit = CliRunner().invoke(app, ["relight", str(folder), "--light", "studio", "-o", str(tmp_path / "relit")])
     assert relit.exit_code == 0, relit.output
     assert any((tmp_path / "relit").rglob("*.png"))
@@ -210,6 +212,20 @@ def test_a_person_with_no_face_in_any_photo_is_one_line(tmp_path):
                                       "-o", str(tmp_path / "out")])
     assert result.exit_code == 1
     assert "none of the 2 photos has a face" in result.output
+    assert not (tmp_path / "out" / "bob" / "params.json").exists()
+
+
+def test_a_card_box_with_several_photos_is_one_line(tmp_path):
+    """A box in one photo's pixels says nothing of where a card is in the others' crops: refused, with the way that
+    works (the card's photo fitted alone, its white level given with --white)."""
+    from PIL import Image
+
+    for name in "ab":
+        Image.new("RGB", (120, 90), (90, 90, 90)).save(tmp_path / f"{name}.png")
+    result = CliRunner().invoke(app, ["fit", "--person", "bob", str(tmp_path / "a.png"), str(tmp_path / "b.png"),
+                                      "--card", "0,0,10,10", "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert "--card with several photos" in result.output and "--white" in result.output
     assert not (tmp_path / "out" / "bob" / "params.json").exists()
 
 

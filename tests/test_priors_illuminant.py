@@ -365,9 +365,9 @@ def test_the_level_prior_can_read_the_light_the_renderer_renders():
         tone = ToneConfig(level_as_rendered=as_rendered)
         context = SimpleNamespace(
             config=SimpleNamespace(tone=tone), renderer=Renderer(RenderConfig()),
-            kept_lights=light,
-            inputs=SimpleNamespace(scene_light=SimpleNamespace(regions=[torch.ones(4, 4, dtype=torch.bool)],
-                                                               illuminant=SimpleNamespace(white=np.full(3, white)))))
+            kept_lights=light, decoupling=SimpleNamespace(frame_lights=lambda frame: torch.ones(1, dtype=torch.bool)),
+            inputs=SimpleNamespace(scene_light=SimpleNamespace(
+                regions=[torch.ones(4, 4, dtype=torch.bool)], illuminants=[SimpleNamespace(white=np.full(3, white))])))
         rendered = SimpleNamespace(normals=torch.tensor([0.0, 0.0, 1.0]).expand(4, 4, 3))
         return float(rendering.scene_light_level(context, 0, rendered))
 
@@ -396,8 +396,9 @@ def test_the_colour_prior_can_read_the_light_the_renderer_renders():
         return SimpleNamespace(
             config=SimpleNamespace(tone=ToneConfig(colour_as_rendered=as_rendered),
                                    weights=SimpleNamespace(light_colour_spread=spread)),
-            renderer=Renderer(RenderConfig()), kept_lights=light,
-            inputs=SimpleNamespace(scene_light=SimpleNamespace(illuminant=SimpleNamespace(white=np.ones(3)))))
+            renderer=Renderer(RenderConfig()), kept_lights=light, target=SimpleNamespace(num_frames=1),
+            decoupling=SimpleNamespace(light_groups=None, frame_lights=lambda frame: torch.ones(1, dtype=torch.bool)),
+            inputs=SimpleNamespace(scene_light=SimpleNamespace(illuminants=[SimpleNamespace(white=np.ones(3))])))
 
     raw, rendered = (float(rendering.scene_light_colour(context(as_rendered))) for as_rendered in (False, True))
     assert raw < 0.01  # neutral at the raw peak (grazing normals)

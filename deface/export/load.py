@@ -79,7 +79,8 @@ def load_fit(path: str | Path, models_dir=None) -> FitOutput:
         lights=FitLights(_tensor(arrays["lights"]), tuple(int(k) for k in arrays["kept"])),
         textures=textures, texels=FitTexels(None, seen, confidence, views),
         illuminant=None if illuminant is None else IlluminantEstimate.from_record(illuminant),
-        framing=framing, kept_frames=None, record=record, renders=())
+        framing=framing, kept_frames=None, record=record, renders=(),
+        photo_illuminants=tuple(IlluminantEstimate.from_record(r) for r in (illuminant or {}).get("per_photo", [])))
     return replace(fit, renders=tuple(fit.render()))
 
 

@@ -128,7 +128,7 @@ def _write_params(result: FitOutput, renders: list, folder: Path, record: dict) 
                       "interval_convention": "texture_ita: the diffuse map's cheeks and forehead (deface.models.ita); "
                                           "ita_interval: the same with the map's level over the white level's "
                                           "one-sigma spread (illuminant.level_sigma)"},
-        "illuminant": None if result.illuminant is None else result.illuminant.record(),
+        "illuminant": result.illuminant_record(),
         "frames": _frames(record.get("frames", [0]), result.kept_frames),
         "preset": config.preset,
         "config": to_dict(config),

@@ -134,4 +134,4 @@ def _resample_map(values: torch.Tensor) -> torch.Tensor:
 def _coarse_scene_light(light: SceneLight | None) -> SceneLight | None:
     if light is None or light.regions is None:
         return light
-    return SceneLight(light.illuminant, tuple(_resample_map(region) >= 0.5 for region in light.regions), light.skin)
+    return replace(light, regions=tuple(_resample_map(region) >= 0.5 for region in light.regions))

@@ -349,6 +349,12 @@ class ToneConfig:
     """Where the tone's flat prior is (degrees of ITA): human skin, from the darkest skins measured (about -50;
     Del Bino et al. 2006's dark group is below -30) to the lightest (about 70; their very light group is above
     55). A fit that would leave it is explaining exposure, not skin."""
+    white_per_photo: bool = True
+    """Several photos of one person (``--person``, each with its own lights, ``lights.per_photo``): each photo's
+    lights are held to its own white level, read off its own crop, or its own colour checker (photos from other
+    cameras, exposures, white balances or places). Off: one white level read off all the photos together, the
+    first photo's checker fixing every photo's (photos of one session). The user's W (``--white``) and a card's
+    box are shared either way. A clip's frames share one white level (they share their lights)."""
     illuminant: IlluminantConfig = field(default_factory=IlluminantConfig)
     """How the scene's illuminant is estimated."""
 

@@ -54,7 +54,7 @@ class Decoupling(torch.nn.Module):
     def light_masks(self, frame: int, coverage: torch.Tensor) -> torch.Tensor:
         """M_L [K_kept, H, W] = M_R * f (renormalised over kept lights), or uniform without f."""
         if self.light_field is None:
-            share = self._allowed(frame, coverage.dtype)
+            share = self.frame_lights(frame, coverage.dtype)
             return (share / share.sum())[:, None, None] * coverage
         # f only where the face is rendered: M_N = M_R * f is zero elsewhere, and this halves the cost.
         covered = coverage > 0
@@ -74,10 +74,10 @@ class Decoupling(torch.nn.Module):
         masks = self.light_field(coords)
         if self.light_groups is None:
             return masks
-        masks = masks * self._allowed(frame, masks.dtype)
+        masks = masks * self.frame_lights(frame, masks.dtype)
         return masks / masks.sum(-1, keepdim=True).clamp_min(1e-12)
 
-    def _allowed(self, frame: int, dtype: torch.dtype) -> torch.Tensor:
+    def frame_lights(self, frame: int, dtype: torch.dtype = torch.bool) -> torch.Tensor:
         """[K_kept] 1 for the kept lights the frame may use (its group's; all without groups), else 0."""
         if self.light_groups is None:
             return torch.ones(len(self._kept), dtype=dtype)

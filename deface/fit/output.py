@@ -153,6 +153,16 @@ class FitOutput:
     record: RunRecord
     renders: tuple[FrameRender, ...]  # T: the fit's I_R, each frame under its kept lights with M_L and M_o,
     # rendered once when the fit finishes (what the outputs write)
+    photo_illuminants: tuple[IlluminantEstimate, ...] = ()  # each photo's own white level, as recorded, in a
+    # several-photo fit with ``tone.white_per_photo`` (empty: ``illuminant`` is every frame's)
+
+    def illuminant_record(self) -> dict | None:
+        """params.json's ``illuminant``: the first photo's estimate, with every photo's (``per_photo``) when they
+        have their own."""
+        if self.illuminant is None:
+            return None
+        per_photo = {"per_photo": [e.record() for e in self.photo_illuminants]} if self.photo_illuminants else {}
+        return {**self.illuminant.record(), **per_photo}
 
     @cached_property
     def renderer(self) -> Renderer:
@@ -208,9 +218,10 @@ class FitOutput:
             lights=FitLights(scene.lights.detach().clone(), tuple(context.decoupling.kept)),
             textures=finished.textures,
             texels=FitTexels(stage3.initial, finished.seen, finished.confidence, tuple(stage3.views)),
-            # as params.json records it (rounded), so a fit and its reload report the same tone interval
-            illuminant=None if light is None else IlluminantEstimate.from_record(light.illuminant.record()),
-            framing=target.framing, kept_frames=target.kept_frames, record=record, renders=tuple(renders))
+            illuminant=None if light is None else _as_recorded(light.illuminant),
+            framing=target.framing, kept_frames=target.kept_frames, record=record, renders=tuple(renders),
+            photo_illuminants=() if light is None or len(light.distinct()) < 2 else tuple(
+                _as_recorded(light.illuminants[frame]) for frame in light.distinct()))
 
     def export_vertices(self) -> np.ndarray:
         """[V, 3] cm: a photo's fitted mesh, or a clip's identity with a neutral expression."""
@@ -276,3 +287,8 @@ def frozen_geometry(model: FaceModel, pose: FitPose, frame: int, framing: Framin
     mesh = Mesh(vertices, topology["triangles"], topology["uvs"], topology["triangle_uvs"])
     principal = None if framing.is_whole else framing.principal_point
     return FrameGeometry(mesh, pose.camera(frame, *framing.size, principal))
+
+
+def _as_recorded(estimate: IlluminantEstimate) -> IlluminantEstimate:
+    """``estimate`` as params.json records it (rounded), so a fit and its reload report the same tone interval."""
+    return IlluminantEstimate.from_record(estimate.record())

@@ -7,8 +7,9 @@ where it fits, the photo's edge pixels repeated where it does not) and resized t
 then treated as the frame of a camera looking at the face's centre: its principal point is the crop's centre, not
 the photo's. For a face near a wide photo's edge the true camera sees it a few degrees obliquely; the frame's own
 rotation takes that up, and the perspective (the shared focal length) differs by the few percent faces' depths
-allow. Shared across the photos: the identity's shape and every map; per photo: pose, expression, light masks, face
-region (and the white level the scene-light terms read off each crop)."""
+allow. Shared across the photos: the identity's shape and every map; per photo: pose, expression, lights and their
+masks, face region, and the white level the scene-light terms read off each crop (``tone.white_per_photo``,
+deface/fit/scene_white.py)."""
 
 from __future__ import annotations
 

@@ -25,11 +25,11 @@ from deface.fit.output import FinishedTextures, FitOutput, RunRecord
 from deface.fit.person import PhotoCrop, person_target, photos_of_one_person
 from deface.fit.scene import SceneParameters, initial_lights
 from deface.fit.scene_light import start_from_scene
-from deface.fit.scene_white import scene_illuminant
+from deface.fit.scene_white import scene_illuminants
 from deface.fit.stage1 import fit_landmarks
 from deface.fit.stage2 import Stage2Result, run_stage2
 from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
-from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext
+from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext, first_of_each
 from deface.fit.target import FitTarget, frame_target
 from deface.fit.texels import complete_textures, filtered_chroma, seen_texels, skin_chroma_matched, texture_confidence
 from deface.fit.texture_size import choose_texture_size
@@ -102,6 +102,10 @@ def fit_photos(photos: list[np.ndarray], sources: list[str], config: FitConfig, 
     a face, or with another person's (:func:`~deface.fit.person.photos_of_one_person`), is left out, said in one
     line; :class:`NoFaceError` when none has a face. ``landmarks``: per photo, those already found on it, or None.
     Returns the fit and where each kept photo's working frame lies in it."""
+    if config.tone.illuminant.reference_box is not None:
+        raise ValueError("--card with several photos of one person: each photo is cut to its own square around the "
+                         "face, so one box does not say where the card is; fit the card's photo alone with --card and "
+                         "give its fit to --white (one session's light), or leave the white level to each photo")
     log = log or FitLog(name=sources[0])
     log.start("landmarks")
     found = landmarks or [None] * len(photos)
@@ -229,16 +233,24 @@ def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,
     classifier, note = face_classifier(face, target, config, models_dir, log)
     scene_light = None
     if config.tone.scene_light_prior:
-        illuminant = scene_illuminant(face, target, config, log)
-        where = f" ({illuminant.detail})" if illuminant.detail else ""
-        log.info(f"scene illuminant: {illuminant.source}{where}, white level "
-                 f"{np.round(illuminant.white, 3).tolist()}, {illuminant.cct:.0f} K")
-        scene_light = start_from_scene(face, target.frames_srgb, classifier, illuminant, config, log)
+        illuminants = scene_illuminants(face, target, config, log)
+        log_illuminants(illuminants, log)
+        scene_light = start_from_scene(face, target, classifier, illuminants, config, log)
     elif config.tone.illuminant.white is not None or config.tone.illuminant.reference_box is not None:
         log.info(f"tone.illuminant's white level is not used: the {config.preset} preset does not hold the lights "
                  "to the scene (tone.scene_light_prior off)")
     inputs = FitInputs(target, landmarks, classifier, scene_light)
     return StageContext.create(inputs, face, decoupling, config, log, texture_size), {"face_parsing": note}
+
+
+def log_illuminants(illuminants: tuple, log: FitLog) -> None:
+    """Say each distinct white level (one per photo of a several-photo fit: "photo 2: ...")."""
+    firsts = first_of_each(illuminants)
+    for index, illuminant in enumerate(illuminants[first] for first in firsts):
+        photo = f"photo {index + 1}: " if len(firsts) > 1 else ""
+        where = f" ({illuminant.detail})" if illuminant.detail else ""
+        log.info(f"{photo}scene illuminant: {illuminant.source}{where}, white level "
+                 f"{np.round(illuminant.white, 3).tolist()}, {illuminant.cct:.0f} K")
 
 
 def _face_sizes(target: FitTarget) -> torch.Tensor:

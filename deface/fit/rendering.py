@@ -88,12 +88,21 @@ def kept_lights_read(context: StageContext, as_rendered: bool) -> torch.Tensor:
 
 
 def scene_light_colour(context: StageContext) -> torch.Tensor:
-    """The scene-light colour term of the kept lights (0 when off or without an estimate)."""
+    """The scene-light colour term of the kept lights (0 when off or without an estimate): each photo's lights
+    against its own white level (one for a photo or a clip), mean over the photos."""
     tone, light = context.config.tone, context.inputs.scene_light
     if not tone.scene_light_prior or light is None:
         return torch.zeros(())
-    return scene_light_colour_loss(kept_lights_read(context, tone.colour_as_rendered), light.illuminant.white,
-                                   tone.weight, tone.colour_sigma)
+    lights = kept_lights_read(context, tone.colour_as_rendered)
+    terms = [scene_light_colour_loss(lights[context.decoupling.frame_lights(frame)], light.illuminants[frame].white,
+                                     tone.weight, tone.colour_sigma) for frame in _light_photos(context)]
+    return torch.stack(terms).mean()
+
+
+def _light_photos(context: StageContext) -> list[int]:
+    """The first frame of each group of frames with its own lights (one for a photo or a clip)."""
+    groups = context.decoupling.light_groups or (0,) * context.target.num_frames
+    return [groups.index(group) for group in sorted(set(groups))]
 
 
 def light_colour_spread(context: StageContext) -> torch.Tensor:
@@ -122,10 +131,11 @@ def with_light_priors(context: StageContext, total: torch.Tensor, terms: LossTer
 
 
 def scene_light_level(context: StageContext, frame: int, rendered: FrameRender) -> torch.Tensor:
-    """The scene-light level term of one frame: the brightest light's level on the cheeks and forehead (0 when
-    off)."""
+    """The scene-light level term of one frame: the brightest of its lights' level on the cheeks and forehead
+    against its white level (0 when off)."""
     tone, light = context.config.tone, context.inputs.scene_light
     if not tone.scene_light_prior or light is None or light.regions is None or rendered.normals is None:
         return torch.zeros(())
-    return scene_light_level_loss(kept_lights_read(context, tone.level_as_rendered), rendered.normals,
-                                  light.regions[frame], light.illuminant.white, tone.weight, tone.exposure_sigma)
+    lights = kept_lights_read(context, tone.level_as_rendered)[context.decoupling.frame_lights(frame)]
+    return scene_light_level_loss(lights, rendered.normals, light.regions[frame], light.illuminants[frame].white,
+                                  tone.weight, tone.exposure_sigma)

@@ -50,13 +50,13 @@ whole face, not only the measured regions:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
 from sklearn.linear_model import QuantileRegressor
 
-from deface.fit.state import SceneLight
+from deface.fit.state import SceneLight, first_of_each
 from deface.io.images import LUMINANCE, linear_to_srgb, srgb_to_linear
 from deface.losses.illuminant import KEY_QUANTILE, front_directions, peak_white
 from deface.models.ita import CLIPPED, MIN_PIXELS, grayscale, in_tone_boxes, ita_of_srgb, pixel_uvs
@@ -92,6 +92,14 @@ class SkinPixels:
     normals: np.ndarray  # [N, 3] unit
     to_camera: np.ndarray  # [N, 3] unit, from the surface to the camera
     in_boxes: np.ndarray  # [N] bool: the cheeks and forehead (deface.models.ita.TONE_BOXES)
+    frame: np.ndarray | None = None  # [N] int: the frame each pixel is in (None: all in one)
+
+    def of_frames(self, frames: list[int]) -> SkinPixels:
+        """The pixels of ``frames`` only."""
+        if self.frame is None:
+            return self
+        chosen = np.isin(self.frame, frames)
+        return SkinPixels(*(getattr(self, field.name)[chosen] for field in fields(self)))
 
 
 def lights_scaled_to_white(lights: torch.Tensor, white: np.ndarray) -> torch.Tensor:
@@ -122,13 +130,13 @@ def face_skin(face, frames_srgb: list[np.ndarray], classifier) -> tuple[list[np.
         to_camera = torch.nn.functional.normalize(geometry.camera.center_in_model() - points, dim=-1)
         srgb = frames_srgb[frame].reshape(-1, 3)[covered]
         parts.append((srgb[skin], normals.numpy()[skin], to_camera.numpy()[skin],
-                      boxes_image.reshape(-1)[covered][skin]))
-    return regions, SkinPixels(*(np.concatenate([p[i] for p in parts]) for i in range(4)))
+                      boxes_image.reshape(-1)[covered][skin], np.full(int(skin.sum()), frame)))
+    return regions, SkinPixels(*(np.concatenate([p[i] for p in parts]) for i in range(5)))
 
 
 def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
-    """Linear RGB [3]: the skin's colour in the key light over the white level ``white`` [3] (the module doc);
-    None when too little skin is seen."""
+    """Linear RGB [3]: the skin's colour in the key light over the white level ``white`` ([3], or [N, 3]: each
+    pixel's photo's; the module doc); None when too little skin is seen."""
     envelope = key_light_envelope(pixels, white)
     if envelope is None:
         return None
@@ -142,9 +150,9 @@ def lit_skin_albedo(pixels: SkinPixels, white: np.ndarray) -> np.ndarray | None:
 
 
 def key_light_envelope(pixels: SkinPixels, white: np.ndarray):
-    """(balanced [N, 3], usable [N], lit [N], coefficients [4]): the skin's pixels over ``white`` less the sheen,
-    which are skin, which are lit, and the lit skin's envelope a0 + a . n of the green level (items 1-4 of the
-    module doc); None when too little skin is seen."""
+    """(balanced [N, 3], usable [N], lit [N], coefficients [4]): the skin's pixels over ``white`` ([3] or [N, 3])
+    less the sheen, which are skin, which are lit, and the lit skin's envelope a0 + a . n of the green level
+    (items 1-4 of the module doc); None when too little skin is seen."""
     balanced = srgb_to_linear(pixels.srgb) / np.asarray(white)
     unclipped = pixels.srgb < CLIPPED  # [N, 3]
     skin = _skin_coloured(balanced, unclipped, pixels.in_boxes)
@@ -265,21 +273,39 @@ def _highlight(direction: np.ndarray, pixels: SkinPixels) -> np.ndarray:
     return (pixels.normals * half).sum(-1) >= HIGHLIGHT_COS
 
 
-def start_from_scene(face, frames_srgb: list[np.ndarray], classifier, illuminant, config, log) -> SceneLight:
-    """Scale ``face.scene``'s initial lights to the scene's white level and start the tone at the photo's (in
-    place); returns the scene light the scene-light terms hold the fit to (a card's reading corrected for how it
-    faces: :func:`facing_illuminant`)."""
-    regions, pixels = face_skin(face, frames_srgb, classifier)
-    illuminant = facing_illuminant(illuminant, pixels, config.tone.illuminant, log)
-    white, scene = illuminant.white, face.scene
+def start_from_scene(face, target, classifier, illuminants: tuple[IlluminantEstimate, ...], config,
+                     log) -> SceneLight:
+    """Scale ``face.scene``'s initial lights to the scene's white level (each photo's lights to its own,
+    ``illuminants``: one per frame) and start the tone at the photo's (in place); returns the scene light the
+    scene-light terms hold the fit to (a card's reading corrected for how it faces: :func:`facing_illuminant`)."""
+    regions, pixels = face_skin(face, target.frames_srgb, classifier)
+    illuminants = facing_illuminants(illuminants, pixels, config.tone.illuminant, log)
+    groups = target.light_groups if config.lights.per_photo and target.light_groups else (0,) * target.num_frames
+    scene = face.scene
     with torch.no_grad():
-        scene.lights.copy_(lights_scaled_to_white(scene.lights, white))
+        for group, lights in enumerate(torch.chunk(scene.lights, len(set(groups)))):
+            lights.copy_(lights_scaled_to_white(lights, illuminants[groups.index(group)].white))
     kept = tuple(torch.as_tensor(r) for r in regions) if sum(int(r.sum()) for r in regions) >= MIN_PIXELS else None
     read = (config.tone.free_tone or config.tone.skin_chroma) and not grayscale(pixels.srgb)
-    skin = lit_skin_albedo(pixels, white) if read else None
+    whites = np.stack([estimate.white for estimate in illuminants])[pixels.frame]  # [N, 3]: each pixel's photo's
+    skin = lit_skin_albedo(pixels, whites) if read else None
     if config.tone.free_tone:
         _start_tone(face, pixels, skin, config, log)
-    return SceneLight(illuminant, kept, skin)
+    return SceneLight(illuminants, kept, skin)
+
+
+def facing_illuminants(illuminants: tuple[IlluminantEstimate, ...], pixels: SkinPixels, settings,
+                       log) -> tuple[IlluminantEstimate, ...]:
+    """Each distinct estimate of ``illuminants`` (one per frame) corrected by :func:`facing_illuminant` on its
+    frames' skin."""
+    corrected = list(illuminants)
+    for first in first_of_each(illuminants):
+        estimate = illuminants[first]
+        frames = [t for t, other in enumerate(illuminants) if other is estimate]
+        fixed = facing_illuminant(estimate, pixels.of_frames(frames), settings, log)
+        for frame in frames:
+            corrected[frame] = fixed
+    return tuple(corrected)
 
 
 def facing_illuminant(illuminant: IlluminantEstimate, pixels: SkinPixels, settings, log) -> IlluminantEstimate:

@@ -1,6 +1,7 @@
 """The scene's white level a fit holds its lights to: the one the user gives (or points a reference card at), a
 colour checker's in the photo, else the estimate from the whole frames outside the stage-1 face
-(deface/priors/illuminant.py, docs/skin-tone.md)."""
+(deface/priors/illuminant.py, docs/skin-tone.md). Several photos of one person each get their own
+(``tone.white_per_photo``, docs/person.md)."""
 
 from __future__ import annotations
 
@@ -13,30 +14,48 @@ from deface.fit.state import PosedFace
 from deface.fit.target import FitTarget
 from deface.io.images import LOAD_MAX_SIDE, resize_max
 from deface.priors.checker import CheckerUnavailable, checker_illuminant, find_checker
-from deface.priors.illuminant import estimate_illuminant, known_illuminant
+from deface.priors.illuminant import IlluminantEstimate, estimate_illuminant, known_illuminant
 
 
 @torch.no_grad()
-def scene_illuminant(face: PosedFace, target: FitTarget, config: FitConfig, log: FitLog):
-    """The white level the user gives (or points a reference card at), else a colour checker's in the photo,
-    else the estimate from every frame's pixels outside the stage-1 face: the whole frames, not only the crop
-    around the face."""
+def scene_illuminants(face: PosedFace, target: FitTarget, config: FitConfig,
+                      log: FitLog) -> tuple[IlluminantEstimate, ...]:
+    """Each frame's white level: the user's (or a reference card's) for every frame, else each photo's own
+    (:func:`white_groups`), else one read off all the frames: a colour checker's in the first frame, or the
+    estimate from every frame's pixels outside the stage-1 face (the whole frames, not only the crop around the
+    face). Frames that share a white level share the estimate (the same object)."""
     scene = target.scene_frames()
     known = known_illuminant(scene, config.tone.illuminant, target.scale)
     if known is not None:
-        return known
+        return (known,) * target.num_frames
     # Statistics of the whole frame: a photo decoded large for a small face (deface/batch/task.py) is read smaller.
     reading = [resize_max(frame, LOAD_MAX_SIDE)[0] for frame in scene]
-    checker = checker_white(reading[0], config.tone.illuminant, log)
-    if checker is not None:
-        return checker
     faces = [scene_face(face, target, frame, reading[frame].shape[:2]) for frame in range(target.num_frames)]
-    return estimate_illuminant(reading, faces, config.tone.illuminant)
+    estimates: list[IlluminantEstimate | None] = [None] * target.num_frames
+    for index, frames in enumerate(white_groups(target, config)):
+        where = f"photo {index + 1}" if len(frames) < target.num_frames else "the photo"
+        estimate = checker_white(reading[frames[0]], config.tone.illuminant, log, where)
+        if estimate is None:
+            estimate = estimate_illuminant([reading[f] for f in frames], [faces[f] for f in frames],
+                                           config.tone.illuminant)
+        for frame in frames:
+            estimates[frame] = estimate
+    return tuple(estimates)
 
 
-def checker_white(photo: np.ndarray, settings, log: FitLog):
-    """W from a colour checker in ``photo`` (the first frame, whole; ``tone.illuminant.checker``), or None, said
-    in the log; ValueError (one line) when it is required ("on") and unavailable or not found."""
+def white_groups(target: FitTarget, config: FitConfig) -> list[list[int]]:
+    """The frames that share a white level: each photo's of a several-photo fit with its own lights and
+    ``tone.white_per_photo``, else all of them."""
+    groups = target.light_groups
+    if groups is None or not config.lights.per_photo or not config.tone.white_per_photo:
+        return [list(range(target.num_frames))]
+    return [[frame for frame, g in enumerate(groups) if g == group] for group in sorted(set(groups))]
+
+
+def checker_white(photo: np.ndarray, settings, log: FitLog, where: str = "the photo"):
+    """W from a colour checker in ``photo`` (a frame, whole; ``tone.illuminant.checker``), or None, said in the
+    log; ValueError (one line) when it is required ("on") and unavailable or not found (``where``: which photo,
+    said in the error)."""
     if settings.checker == "off":
         return None
     try:
@@ -48,8 +67,9 @@ def checker_white(photo: np.ndarray, settings, log: FitLog):
         return None
     if reading is None:
         if settings.checker == "on":
-            raise ValueError("tone.illuminant.checker=on: no colour checker found in the photo (its six grey "
-                             "patches must show, unclipped)")
+            raise ValueError(f"tone.illuminant.checker=on: no colour checker found in {where} (its six "
+                             "grey patches must show, unclipped; with one checker for several photos of one session, "
+                             "--set tone.white_per_photo=false)")
         return None
     return checker_illuminant(reading, settings)
 

@@ -59,9 +59,24 @@ class LandmarkTarget:
 class SceneLight:
     """The scene's light as the scene-light terms see it (``tone.scene_light_prior``)."""
 
-    illuminant: IlluminantEstimate  # white level and colour temperature read off the photo
+    illuminants: tuple[IlluminantEstimate, ...]  # T: each frame's white level and colour temperature (frames
+    # that share one, a clip's or one session's photos, share the object)
     regions: tuple[torch.Tensor, ...] | None  # T x [H, W] bool cheek/forehead skin (None: too little skin)
     skin: np.ndarray | None = None  # [3] linear RGB: the skin in the key light over W (None: not read)
+
+    @property
+    def illuminant(self) -> IlluminantEstimate:
+        """The first frame's estimate: what params.json's ``illuminant`` and the tone's interval say."""
+        return self.illuminants[0]
+
+    def distinct(self) -> list[int]:
+        """The first frame of each distinct white level."""
+        return first_of_each(self.illuminants)
+
+
+def first_of_each(items: tuple | list) -> list[int]:
+    """The position of the first of each distinct object in ``items`` (by identity)."""
+    return [t for t, item in enumerate(items) if all(item is not other for other in items[:t])]
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,8 @@ def log_tone(context: StageContext, finished: FinishedTextures, log: FitLog) -> 
     darker, lighter = tone["ita_interval"]
     text = (f"skin tone of the texture: ITA {tone['texture_ita']:.1f}, {darker:.0f} to {lighter:.0f} for the light "
             f"level's one-sigma spread ({illuminant.source})")
-    if illuminant.source not in CARD_SOURCES:
+    if illuminant.source not in CARD_SOURCES and context.target.light_groups is None:
         text += "; a grey card in the photo (--card) or the light's white level (--white) narrows it"
+    elif illuminant.source not in CARD_SOURCES:
+        text += "; the light's white level (--white: a fit of one photo with a grey card, --card) narrows it"
     log.info(text)

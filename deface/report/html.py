@@ -126,6 +126,8 @@ def _diffuse_caption(fit: FitOutput) -> str:
     """The diffuse map's caption: its skin tone, and the range the unknown light level leaves open."""
     tone = fit.skin_tone()
     source = fit.illuminant and (fit.illuminant.detail or fit.illuminant.source)
+    if fit.photo_illuminants:
+        source = "each photo's own scene (the first photo's spread)"
     where = f"; light level from {source}" if source else ""
     if tone["texture_ita"] is None:
         return f"diffuse (skin tone not measured: {tone['note']})"
