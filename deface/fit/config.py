@@ -353,8 +353,9 @@ class ToneConfig:
     """Several photos of one person (``--person``, each with its own lights, ``lights.per_photo``): each photo's
     lights are held to its own white level, read off its own crop, or its own colour checker (photos from other
     cameras, exposures, white balances or places). Off: one white level read off all the photos together, the
-    first photo's checker fixing every photo's (photos of one session). The user's W (``--white``) and a card's
-    box are shared either way. A clip's frames share one white level (they share their lights)."""
+    first photo's checker fixing every photo's (one camera under one light). The user's W (``--white``) is every
+    photo's either way; a card's box (``--card``) is refused with several photos (one box does not place the card in
+    the others' crops). A clip's frames share one white level (they share their lights)."""
     illuminant: IlluminantConfig = field(default_factory=IlluminantConfig)
     """How the scene's illuminant is estimated."""
 
