@@ -101,8 +101,27 @@ def test_a_person_input_takes_photos_and_a_plain_name(tmp_path):
     assert moved.photos == (tmp_path / "x" / "a.jpg", tmp_path / "y" / "a.jpg") and moved.name == "ada"
     with pytest.raises(InputError, match="no slashes"):
         person_input("a/b", photos)
-    with pytest.raises(InputError, match="not clips"):
-        person_input("ada", [*photos, InputItem(tmp_path / "c.mp4", "video")])
+    with_clip = person_input("ada", [*photos, InputItem(tmp_path / "c.mp4", "video")])
+    assert with_clip.files[-1] == tmp_path / "c.mp4"
+
+
+def test_a_clips_frames_are_photos_of_the_person(tmp_path):
+    """``--person NAME clip.mp4 photo.png``: the clip's frames, spread over it as a clip's fit takes them, are
+    photos of their own, named by their index in the clip."""
+    import imageio.v2 as imageio
+
+    from deface.batch.task import person_photos
+
+    clip = tmp_path / "c.mp4"
+    with imageio.get_writer(str(clip), fps=5, quality=9, macro_block_size=1) as writer:
+        for level in range(10):
+            writer.append_data(np.full((32, 48, 3), 20 * level, dtype=np.uint8))
+    config = FitConfig(max_frames=4)
+    photos = person_photos(clip, config)
+    assert [source for source, _ in photos] == [f"{clip}#{index}" for index in (0, 3, 6, 9)]
+    levels = [float(photo.mean()) for _, (photo, found) in photos]
+    assert all(found is None for _, (_, found) in photos) and levels == sorted(levels)  # in the clip's order
+    assert photos[0][1][0].shape == (32, 48, 3)
 
 
 def test_the_person_is_the_photos_most_others_are_close_to():

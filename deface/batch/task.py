@@ -21,7 +21,7 @@ from deface.fit.log import FitLog
 from deface.fit.output import FitOutput
 from deface.fit.pipeline import fit, fit_photos
 from deface.io.images import LOAD_MAX_PIXELS, LOAD_MAX_SIDE, InputError, image_size, load_image, one_line
-from deface.io.inputs import InputItem
+from deface.io.inputs import InputItem, classify
 from deface.io.video import read_spread_frames
 from deface.landmarks.detect import NoFaceError, detect_landmarks
 from deface.paths import ModelFileError
@@ -149,14 +149,20 @@ def fit_input(item: InputItem, config: FitConfig, models, log: FitLog) -> tuple[
 
 
 def fit_person(item: InputItem, config: FitConfig, models, log: FitLog) -> tuple[FitOutput, dict]:
-    """Fit a person's photos as one fit (deface/fit/person.py); photos without a face are left out (said)."""
-    loaded, sources = [], []
+    """Fit a person's photos as one fit (deface/fit/person.py); a clip's frames (``max_frames`` spread over it) are
+    photos too, named ``clip.mp4#index``; photos without a face are left out (said)."""
+    loaded, sources, given = [], [], []
     for path in item.photos:
         try:
-            loaded.append(load_photo(path, config))
-            sources.append(str(path))
+            photos = person_photos(path, config)
         except InputError as error:
             log.info(f"{one_line(error)}; left out of the fit")
+            given.append(str(path))
+            continue
+        for source, photo in photos:
+            loaded.append(photo)
+            sources.append(source)
+            given.append(source)
     if not loaded:
         raise InputError(f"{item.name}: none of its {len(item.photos)} photos could be read")
     result, crops = fit_photos([photo for photo, _ in loaded], sources, config, models_dir=models, log=log,
@@ -164,8 +170,17 @@ def fit_person(item: InputItem, config: FitConfig, models, log: FitLog) -> tuple
     used, side, focal = {crop.source for crop in crops}, result.framing.size[0], float(result.pose.focal)
     record = {"path": str(item.path), "kind": "person", "name": item.name, "frames": list(range(len(crops))),
               "photos": [crop.record(focal, side) for crop in crops],
-              "left_out": [str(path) for path in item.photos if str(path) not in used]}
+              "left_out": [source for source in given if source not in used]}
     return result, record
+
+
+def person_photos(path: Path, config: FitConfig) -> list[tuple[str, tuple[np.ndarray, object]]]:
+    """(source, (photo, its landmarks or None)) of one file given to ``--person``: a photo, or a clip's frames
+    spread over it (as a clip's fit takes them), each a photo of its own."""
+    if classify(path) != "video":
+        return [(str(path), load_photo(path, config))]
+    frames, indices = read_spread_frames(path, config.max_frames, config.frame_stride, max_side=LOAD_MAX_SIDE)
+    return [(f"{path}#{index}", (frame, None)) for frame, index in zip(frames, indices, strict=True)]
 
 
 def _fit_and_write(item: InputItem, folder: Path, config: FitConfig, models,

@@ -56,9 +56,10 @@ def fit_command(
     card_facing: options.CardFacing = None,
     white: options.White = None,
     checker: options.Checker = None,
-    person: Annotated[str | None, typer.Option("--person", help="The inputs are photos of one person: fit them as "
-                                               "one, into OUT/PERSON/ (one shape and one set of maps; pose, "
-                                               "expression, lights and masks per photo).")] = None,
+    person: Annotated[str | None, typer.Option("--person", help="The inputs are photos of one person (a clip's "
+                                               "frames count as photos): fit them as one, into OUT/PERSON/ (one "
+                                               "shape and one set of maps; pose, expression, lights, masks and "
+                                               "white level per photo).")] = None,
     people: Annotated[bool, typer.Option("--people", help="Each input is a folder of photos of one person, fitted "
                                          "as one into OUT/<folder name>/ (as --person).")] = False,
     overwrite: Annotated[bool, typer.Option(help="Redo inputs whose outputs already exist (default: skip them).")]

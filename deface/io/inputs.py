@@ -39,12 +39,10 @@ class InputItem:
 
 
 def person_input(name: str, items: list[InputItem]) -> InputItem:
-    """Several photos of one person, named ``name``, as one input; clips and an unusable name are refused."""
+    """Several photos of one person, named ``name``, as one input (a clip's frames count as photos); an unusable
+    name is refused."""
     if not name or name in (".", "..") or any(c in name for c in "/\\\0"):
         raise InputError(f"--person {name!r}: a name for the output folder (no slashes) expected")
-    clips = [str(item.path) for item in items if item.kind != "image"]
-    if clips:
-        raise InputError(f"--person takes photos, not clips: {', '.join(clips)}")
     return InputItem(items[0].path, "person", tuple(item.path for item in items), name)
 
 
