@@ -34,7 +34,8 @@ def scene_illuminants(face: PosedFace, target: FitTarget, config: FitConfig,
     estimates: list[IlluminantEstimate | None] = [None] * target.num_frames
     for index, frames in enumerate(white_groups(target, config)):
         where = f"photo {index + 1}" if len(frames) < target.num_frames else "the photo"
-        estimate = checker_white(reading[frames[0]], config.tone.illuminant, log, where)
+        said = log if index == 0 else FitLog(quiet=True)  # a missing detector is said once, not per photo
+        estimate = checker_white(reading[frames[0]], config.tone.illuminant, said, where)
         if estimate is None:
             estimate = estimate_illuminant([reading[f] for f in frames], [faces[f] for f in frames],
                                            config.tone.illuminant)
