@@ -280,7 +280,7 @@ def start_from_scene(face, target, classifier, illuminants: tuple[IlluminantEsti
     scene-light terms hold the fit to (a card's reading corrected for how it faces: :func:`facing_illuminant`)."""
     regions, pixels = face_skin(face, target.frames_srgb, classifier)
     illuminants = facing_illuminants(illuminants, pixels, config.tone.illuminant, log)
-    groups = target.light_groups if config.lights.per_photo and target.light_groups else (0,) * target.num_frames
+    groups = target.lights_of_frames(config.lights.per_photo)
     scene = face.scene
     with torch.no_grad():
         for group, lights in enumerate(torch.chunk(scene.lights, len(set(groups)))):

@@ -47,9 +47,7 @@ def scene_illuminants(face: PosedFace, target: FitTarget, config: FitConfig,
 def white_groups(target: FitTarget, config: FitConfig) -> list[list[int]]:
     """The frames that share a white level: each photo's of a several-photo fit with its own lights and
     ``tone.white_per_photo``, else all of them."""
-    groups = target.light_groups
-    if groups is None or not config.lights.per_photo or not config.tone.white_per_photo:
-        return [list(range(target.num_frames))]
+    groups = target.lights_of_frames(config.lights.per_photo and config.tone.white_per_photo)
     return [[frame for frame, g in enumerate(groups) if g == group] for group in sorted(set(groups))]
 
 

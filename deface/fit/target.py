@@ -58,6 +58,11 @@ class FitTarget:
         """(x, y) working pixels of the photo's principal point; None when it is the frames' centre (no crop)."""
         return None if self.framing.is_whole else self.framing.principal_point
 
+    def lights_of_frames(self, per_photo: bool) -> tuple[int, ...]:
+        """Per frame, the group of lights it uses: each photo's own with ``per_photo`` (``light_groups``), else
+        one group (0) for every frame."""
+        return self.light_groups if per_photo and self.light_groups is not None else (0,) * self.num_frames
+
     def scene_frames(self) -> list[np.ndarray]:
         """T x [Hs, Ws, 3] the whole input frames at the working scale (the working frames when uncropped)."""
         if self.scene_srgb is not None:
