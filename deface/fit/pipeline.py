@@ -32,7 +32,6 @@ from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext, first_of_each
 from deface.fit.target import FitTarget, frame_target
 from deface.fit.texels import (
-    SKIN_SEEN,
     complete_textures,
     filtered_chroma,
     one_colour_lights,
@@ -47,7 +46,6 @@ from deface.landmarks.detect import NoFaceError, detect_landmarks, track_video
 from deface.models.registry import load_face_model
 from deface.priors.human import load_human_prior
 from deface.runtime import keep_freed_memory, torch_threads
-from deface.texture.completion import layout_regions
 
 
 @dataclass(frozen=True)
@@ -202,7 +200,7 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
     seen = seen_texels(stage3.views, [rendered.face_region for rendered in renders])
     textures = stage3.textures
     if context.config.chroma.monochrome_lights:
-        textures = _lights_colour_constant(context, textures, seen, stage3, renders)
+        textures = _lights_colour_constant(context, textures, stage3, renders)
     if context.config.chroma.enabled:
         textures = filtered_chroma(textures, seen, stage3.views, context.config.chroma)
     if context.config.completion.enabled:
@@ -216,15 +214,12 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
     return FinishedTextures(textures, seen, texture_confidence(stage3.views, renders))
 
 
-def _lights_colour_constant(context: StageContext, textures, seen, stage3: Stage3Result, renders):
-    """The lights' change of colour with direction that leaves the smoothest map (deface/fit/texels.py
-    :func:`one_colour_lights`), the map the rest; renders unchanged."""
+def _lights_colour_constant(context: StageContext, textures, stage3: Stage3Result, renders):
+    """Each kept light one colour, the map the change (deface/fit/texels.py :func:`one_colour_lights`)."""
     casts = [frame.cast for frame in stage3.frozen]
-    skin = layout_regions(context.model, seen.shape[0]).skin & (seen >= SKIN_SEEN)
-    textures, lights, share = one_colour_lights(context.renderer, casts, stage3.views, renders, textures,
-                                                context.kept_lights.detach(), skin)
+    textures, lights = one_colour_lights(context.renderer, casts, stage3.views, renders, textures,
+                                         context.kept_lights.detach())
     context.scene.lights[context.decoupling.kept] = lights
-    context.log.info(f"the lights' change of colour with direction: {1 - share:.0%} kept (the smoothest map)")
     return textures
 
 

@@ -16,7 +16,7 @@ from deface.io.images import LUMINANCE
 from deface.models.uvmap import rasterize_uv
 from deface.render.frame import shade_frame
 from deface.render.mesh import Textures
-from deface.texture.chroma import ChromaConfig, chroma_roughness, filter_chroma, skin_chroma_gain, texels_per_pixel
+from deface.texture.chroma import ChromaConfig, filter_chroma, skin_chroma_gain, texels_per_pixel
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
 from deface.texture.confidence import TexelView, combine_frames, texel_view, unwrap
 
@@ -136,39 +136,19 @@ def irradiance_ratio(views: list[TexelView], renders: list, old: list[torch.Tens
     return np.exp(total / weight[..., None])
 
 
-GAUGE_STEPS = (0.0, 0.25, 0.5, 0.75, 1.0)
-"""The shares of the lights' change of colour with direction tried by :func:`one_colour_lights`."""
-GAUGE_SIGMA = 0.01
-"""The scale (of the map's side; 5 texels at 512²) below which :func:`one_colour_lights` reads the map's chroma
-roughness: the width of the fringes a light's turning colour leaves around the nose, the mouth and the brows."""
-
-
 def one_colour_lights(renderer, casts: list, views: list[TexelView], renders: list, textures: Textures,
-                      lights: torch.Tensor, skin: np.ndarray) -> tuple[Textures, torch.Tensor, float]:
-    """The ``lights`` [K, B*B, 3] with the share of their change of colour with direction, of
-    :data:`GAUGE_STEPS`, that leaves the diffuse map's chroma smoothest over ``skin`` [Ht, Wt] bool
-    (:func:`~deface.texture.chroma.chroma_roughness`); the map takes the change of the irradiance's colour at every
-    texel (:func:`irradiance_ratio`), so every frame's diffuse render is unchanged. Share 1 gives each light one
-    colour, its mean over the face (:func:`irradiance_colours`), with the luminance's SH it had.
-
-    Why: a photo cannot tell a light whose colour turns with direction from a map whose chroma turns the other
-    way where the normals turn. A spurious turn leaves a rainbow around the nose, the mouth and the brows; a real
-    one (a warm key and a cool fill) taken out of the lights leaves it instead. Skin's chroma is smooth, so the
-    smoothest map decides. ``casts`` and ``renders``: the frames' casts and renders (their masks and M_o). Returns
-    the maps, the lights and the share."""
+                      lights: torch.Tensor) -> tuple[Textures, torch.Tensor]:
+    """Each of the ``lights`` [K, B*B, 3] given one colour, its mean over the face (:func:`irradiance_colours`),
+    and the luminance's SH it had; the diffuse map takes the change of the irradiance's colour at every texel
+    (:func:`irradiance_ratio`), so every frame's diffuse render is unchanged. Why: a light whose colour changes
+    with direction leaves its inverse in the map wherever the normals turn (a rainbow around the nose, the mouth
+    and the brows); a skin's colour does not change with the direction it faces. ``casts`` and ``renders``: the
+    frames' casts and renders (their masks and M_o). Returns the maps and the new lights."""
     white = Textures(torch.ones_like(textures.diffuse), torch.zeros_like(textures.specular), textures.roughness)
     old = [shade_frame(renderer, cast, white, lights).images for cast in casts]
     colours = irradiance_colours(old, [rendered.light_masks.detach() for rendered in renders],
                                  [rendered.face_region.detach() for rendered in renders])
     one_colour = monochrome(lights, colours)
-    sigma = GAUGE_SIGMA * textures.diffuse.shape[0]
-    best = (chroma_roughness(textures.diffuse.numpy(), skin, sigma), textures, lights, 0.0)
-    for share in GAUGE_STEPS[1:]:
-        moved = (1 - share) * lights + share * one_colour
-        new = [shade_frame(renderer, cast, white, moved).images for cast in casts]
-        ratio = torch.from_numpy(irradiance_ratio(views, renders, old, new)).to(textures.diffuse.dtype)
-        maps = Textures((textures.diffuse * ratio).clamp(0, 1), textures.specular, textures.roughness)
-        roughness = chroma_roughness(maps.diffuse.numpy(), skin, sigma)
-        if roughness < best[0]:
-            best = (roughness, maps, moved, share)
-    return best[1:]
+    new = [shade_frame(renderer, cast, white, one_colour).images for cast in casts]
+    ratio = torch.from_numpy(irradiance_ratio(views, renders, old, new)).to(textures.diffuse.dtype)
+    return Textures((textures.diffuse * ratio).clamp(0, 1), textures.specular, textures.roughness), one_colour

@@ -114,24 +114,3 @@ def filter_chroma(diffuse: np.ndarray, weight: np.ndarray, config: ChromaConfig,
     keep = diffuse.max(-1) <= FLOOR  # black texels (outside the layout) stay as they were
     out[keep] = diffuse[keep]
     return out.astype(diffuse.dtype)
-
-
-CHROMA_AXES = np.array([[1.0, -1.0, 0.0], [0.5, 0.5, -1.0]]) / np.array([[np.sqrt(2.0)], [np.sqrt(1.5)]])
-"""The two axes of log RGB orthogonal to grey (red-green, yellow-blue), unit length."""
-
-
-def fine_chroma(image: np.ndarray, sigma: float, floor: float = FLOOR) -> np.ndarray:
-    """[Ht, Wt, 2] the chroma of ``image``'s [Ht, Wt, 3] (linear, floored at ``floor``) structure finer than a
-    Gaussian of ``sigma`` texels: log RGB minus its blur, on :data:`CHROMA_AXES`."""
-    logs = np.log(np.maximum(image, floor))
-    fine = logs - np.stack([ndimage.gaussian_filter(logs[..., c], sigma, mode="nearest") for c in range(3)], -1)
-    return fine @ CHROMA_AXES.T
-
-
-def chroma_roughness(image: np.ndarray, region: np.ndarray, sigma: float) -> float:
-    """The median over ``region`` [Ht, Wt] bool of the length of :func:`fine_chroma`: how far the typical texel's
-    chroma strays from its surroundings' (a median, so that the eyes, the nostrils and the hairline at the
-    region's edges do not decide); 0 for an empty region."""
-    if not region.any():
-        return 0.0
-    return float(np.median(np.linalg.norm(fine_chroma(image, sigma)[region], axis=-1)))
