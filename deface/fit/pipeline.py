@@ -31,14 +31,7 @@ from deface.fit.stage2 import Stage2Result, run_stage2
 from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext, first_of_each
 from deface.fit.target import FitTarget, frame_target
-from deface.fit.texels import (
-    complete_textures,
-    filtered_chroma,
-    one_colour_lights,
-    seen_texels,
-    skin_chroma_matched,
-    texture_confidence,
-)
+from deface.fit.texels import complete_textures, filtered_chroma, seen_texels, skin_chroma_matched, texture_confidence
 from deface.fit.texture_size import choose_texture_size
 from deface.fit.tone_start import initial_tone, log_tone, supported_tone
 from deface.landmarks.correspondence import correspondence_for
@@ -199,8 +192,6 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
     renders = [render_frozen(context, frame, stage3.textures)[0] for frame in stage3.frozen]
     seen = seen_texels(stage3.views, [rendered.face_region for rendered in renders])
     textures = stage3.textures
-    if context.config.chroma.monochrome_lights:
-        textures = _lights_colour_constant(context, textures, stage3, renders)
     if context.config.chroma.enabled:
         textures = filtered_chroma(textures, seen, stage3.views, context.config.chroma)
     if context.config.completion.enabled:
@@ -212,15 +203,6 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
             context.log.info(f"the map's skin takes the photo's skin chroma (gain {np.round(gain, 3).tolist()}); "
                              "the lights the inverse")
     return FinishedTextures(textures, seen, texture_confidence(stage3.views, renders))
-
-
-def _lights_colour_constant(context: StageContext, textures, stage3: Stage3Result, renders):
-    """Each kept light one colour, the map the change (deface/fit/texels.py :func:`one_colour_lights`)."""
-    casts = [frame.cast for frame in stage3.frozen]
-    textures, lights = one_colour_lights(context.renderer, casts, stage3.views, renders, textures,
-                                         context.kept_lights.detach())
-    context.scene.lights[context.decoupling.kept] = lights
-    return textures
 
 
 def prepare(target: FitTarget, config: FitConfig, *, models_dir=None,

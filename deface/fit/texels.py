@@ -14,11 +14,10 @@ import torch
 
 from deface.io.images import LUMINANCE
 from deface.models.uvmap import rasterize_uv
-from deface.render.frame import shade_frame
 from deface.render.mesh import Textures
 from deface.texture.chroma import ChromaConfig, filter_chroma, skin_chroma_gain, texels_per_pixel
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
-from deface.texture.confidence import TexelView, combine_frames, texel_view, unwrap
+from deface.texture.confidence import TexelView, combine_frames, texel_view
 
 LUMINANCE_T = torch.as_tensor(LUMINANCE, dtype=torch.float32)
 
@@ -100,55 +99,3 @@ def complete_textures(model, textures: Textures, initial: Textures, seen_map: np
                                                    cavity=name == "diffuse"))
     maps["roughness"] = maps["roughness"].clamp_min(0.05)  # stage 3's roughness range
     return Textures(**maps)
-
-
-def irradiance_colours(irradiance: list[torch.Tensor], masks: list[torch.Tensor],
-                       regions: list[torch.Tensor]) -> torch.Tensor:
-    """[K, 3] each light's mean colour over the face where its mask lets it in, at luminance 1:
-    ``irradiance`` per frame [K, H, W, 3] (white albedo), ``masks`` [K, H, W], ``regions`` [H, W]."""
-    total = sum((images * (mask * region)[..., None]).sum((1, 2))
-                for images, mask, region in zip(irradiance, masks, regions, strict=True))
-    plain = sum((images * region[..., None]).sum((1, 2)) for images, region in zip(irradiance, regions, strict=True))
-    luminance = LUMINANCE_T.to(total.dtype)
-    weak = (total @ luminance) < 1e-3 * (plain @ luminance).clamp_min(1e-12)
-    total = torch.where(weak[:, None], plain, total)
-    return total / (total @ luminance).clamp_min(1e-12)[:, None]
-
-
-def monochrome(lights: torch.Tensor, colours: torch.Tensor) -> torch.Tensor:
-    """[K, B*B, 3] the lights with their luminance's SH and one colour each (``colours`` [K, 3], luminance 1)."""
-    return (lights @ LUMINANCE_T.to(lights.dtype))[..., None] * colours[:, None, :]
-
-
-def irradiance_ratio(views: list[TexelView], renders: list, old: list[torch.Tensor],
-                     new: list[torch.Tensor]) -> np.ndarray:
-    """[Ht, Wt, 3] the masked irradiance under the ``old`` lights over that under the ``new`` ones at each texel,
-    the frames that saw it averaged (in logs) by how squarely; 1 where none did. ``old``, ``new`` [K, H, W, 3] per
-    frame, white albedo."""
-    total, weight = 0.0, 1e-12
-    for view, rendered, before, after in zip(views, renders, old, new, strict=True):
-        masks = rendered.light_masks.detach()[..., None]
-        lit_before, lit_after = (masks * before).sum(0), (masks * after).sum(0)
-        ratio = torch.where(lit_after > 1e-6, lit_before / lit_after.clamp_min(1e-6), torch.ones_like(lit_after))
-        seen = view.seen(rendered.face_region.detach().numpy())
-        total = total + unwrap(np.log(ratio.clamp(1e-3, 1e3).numpy()), view) * seen[..., None]
-        weight = weight + seen
-    return np.exp(total / weight[..., None])
-
-
-def one_colour_lights(renderer, casts: list, views: list[TexelView], renders: list, textures: Textures,
-                      lights: torch.Tensor) -> tuple[Textures, torch.Tensor]:
-    """Each of the ``lights`` [K, B*B, 3] given one colour, its mean over the face (:func:`irradiance_colours`),
-    and the luminance's SH it had; the diffuse map takes the change of the irradiance's colour at every texel
-    (:func:`irradiance_ratio`), so every frame's diffuse render is unchanged. Why: a light whose colour changes
-    with direction leaves its inverse in the map wherever the normals turn (a rainbow around the nose, the mouth
-    and the brows); a skin's colour does not change with the direction it faces. ``casts`` and ``renders``: the
-    frames' casts and renders (their masks and M_o). Returns the maps and the new lights."""
-    white = Textures(torch.ones_like(textures.diffuse), torch.zeros_like(textures.specular), textures.roughness)
-    old = [shade_frame(renderer, cast, white, lights).images for cast in casts]
-    colours = irradiance_colours(old, [rendered.light_masks.detach() for rendered in renders],
-                                 [rendered.face_region.detach() for rendered in renders])
-    one_colour = monochrome(lights, colours)
-    new = [shade_frame(renderer, cast, white, one_colour).images for cast in casts]
-    ratio = torch.from_numpy(irradiance_ratio(views, renders, old, new)).to(textures.diffuse.dtype)
-    return Textures((textures.diffuse * ratio).clamp(0, 1), textures.specular, textures.roughness), one_colour

@@ -40,9 +40,6 @@ class ChromaConfig:
     enabled: bool = True
     """Filter the diffuse map's chroma (docs/textures.md "Chroma"). Off (the paper's and NextFace's presets, and
     deface-mean-skin): stage 3's map as it is."""
-    monochrome_lights: bool = False
-    """Before the filter, give each light one colour (its mean over the face) and the map the change, so the
-    lights' colour no longer varies with direction (render unchanged)."""
     radius: float = 0.008
     """Window half-side as a fraction of the map's side (4 texels at 512²): the scale of the colour noise removed."""
     pixels: float = 2.0
