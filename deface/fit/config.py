@@ -212,6 +212,10 @@ class Iterations:
     per-pixel work; pose, shape, albedo coefficients, lights and f, g are not tied to the pixel grid); the rest
     refine at the working size: half, as good on the shadow pairs at half the cost (benchmarks/history.md
     "Speed"). 0 = every step at the working size; a share, so `--iterations` keeps it."""
+    stage2_frames_per_step: int = 0
+    """Stage 2 renders at most this many frames per step, a turn of them (deface/fit/frame_turns.py: each round
+    of steps shows every frame once, in a new order), so a step of a many-photo fit or a clip costs no more than
+    this many frames. 0 = every frame at every step."""
     coarse_min_side: int = 128
     """No half-size steps when the half size would be under this many pixels on its longer side."""
     stage2_tolerance: float = 0.0

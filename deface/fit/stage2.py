@@ -15,6 +15,7 @@ from deface.decouple.ace import light_areas
 from deface.fit import rendering
 from deface.fit.coarse import can_coarsen, coarse_context, half_size
 from deface.fit.convergence import converged
+from deface.fit.frame_turns import FrameTurns
 from deface.fit.guard import StepGuard
 from deface.fit.state import FrameRender, LossTerms, StageContext
 from deface.losses import decouple as decouple_losses
@@ -42,14 +43,16 @@ def run_stage2(context: StageContext) -> Stage2Result:
     coarse_steps, coarse = _coarse_level(context)
     tone_boxes = (ToneBoxColours.of(context.model.albedo) if config.tone.free_tone and config.tone.neutral_albedo
                   else None)
+    turns = _frame_turns(context)
     for step in range(config.iterations.stage2):
         level = coarse if step < coarse_steps else context
         if step == ace_at and decoupling.light_field is not None:
             _apply_ace(level)
         optimiser.zero_grad(set_to_none=True)
-        refresh = step % config.iterations.shadow_refresh_every == 0
+        frames = turns.at(step)
+        refresh = frozenset(frame for frame in frames if turns.refresh(frame, step))
         terms = LossTerms()
-        loss = objective(level, before_ace=step < ace_at, refresh_shadows=refresh, terms=terms)
+        loss = objective(level, before_ace=step < ace_at, refresh_shadows=refresh, terms=terms, frames=frames)
         loss.backward()
         optimiser.step()
         scene.clamp_(context.model.expression_prior)
@@ -70,6 +73,15 @@ def run_stage2(context: StageContext) -> Stage2Result:
                              f"(tolerance {iterations.stage2_tolerance} per {iterations.convergence_window} steps)")
             break
     return Stage2Result(history, term_history, decoupling.kept)
+
+
+def _frame_turns(context: StageContext) -> FrameTurns:
+    """The frames of each step (deface/fit/frame_turns.py), said in the log when a step renders fewer than all."""
+    iterations, frames = context.config.iterations, context.target.num_frames
+    turns = FrameTurns(frames, iterations.stage2_frames_per_step, iterations.shadow_refresh_every, context.config.seed)
+    if not turns.every_step:
+        context.log.info(f"stage 2: {turns.per_step} of the {frames} frames per step, in turn")
+    return turns
 
 
 def _weighted_by_evidence(context: StageContext) -> StageContext:
@@ -119,24 +131,28 @@ def _parameter_groups(context: StageContext) -> list[dict]:
     return groups
 
 
-def objective(context: StageContext, before_ace: bool, refresh_shadows: bool,
-              terms: LossTerms | None = None) -> torch.Tensor:
-    """The stage-2 loss (the total); ``terms`` collects it by name (frame terms as their mean over frames)."""
-    weights, scene, frames = context.config.weights, context.scene, context.target.num_frames
+def objective(context: StageContext, before_ace: bool, refresh_shadows: bool | frozenset[int],
+              terms: LossTerms | None = None, frames: tuple[int, ...] | None = None) -> torch.Tensor:
+    """The stage-2 loss (the total) over ``frames`` (default: every frame; frame terms as their mean over them);
+    ``refresh_shadows``: whether the frames' shadow transfers refresh, or the frames whose do. ``terms`` collects
+    the loss by name."""
+    weights, scene = context.config.weights, context.scene
+    frames = tuple(range(context.target.num_frames)) if frames is None else frames
     terms = terms or LossTerms()
-    per_frame = 1.0 / frames
+    per_frame = 1.0 / len(frames)
     textures = rendering.albedo_textures(context)
     total = torch.zeros(())
-    for frame in range(frames):
+    for frame in frames:
         geometry = context.geometry(frame)  # once per step: shared by the render and L_lan
-        rendered = rendering.render_posed(context, frame, textures, refresh_shadows, geometry=geometry)
+        refresh = refresh_shadows if isinstance(refresh_shadows, bool) else frame in refresh_shadows
+        rendered = rendering.render_posed(context, frame, textures, refresh, geometry=geometry)
         total = total + terms.add("photometric", weights.photometric * rendering.photometric(context, frame, rendered),
                                   per_frame)
         total = total + terms.add("landmarks", weights.landmarks * context.inputs.landmarks.loss(geometry, frame),
                                   per_frame)
         total = total + _decoupling_terms(context, frame, rendered, before_ace, terms, per_frame)
         total = total + terms.add("scene_light_level", rendering.scene_light_level(context, frame, rendered), per_frame)
-    total = total / frames
+    total = total / len(frames)
     total = total + terms.add("sh_regulariser",
                               weights.sh_regulariser * context.kept_lights.pow(2).mean())
     total = total + terms.add("albedo_prior", weights.albedo_prior * scene.albedo.pow(2).mean())
