@@ -54,17 +54,19 @@ def test_shadow_refreshes_are_those_of_every_frame_at_every_step_and_never_furth
 
 
 @pytest.fixture(scope="module")
-def three_frames(shared):
+def three_photos(shared):
+    """Three photos of one person, each with its own lights (a person's fit)."""
     model = load_face_model("ict")
     faces = [make_shadowed_face(model, size=48, seed=seed, rays=8) for seed in (1, 2, 3)]
     config = override(presets.get("default"), **SCHEDULES["smoke"])
-    target = FitTarget([face.image_srgb for face in faces], [face.landmarks for face in faces], 1.0)
+    target = FitTarget([face.image_srgb for face in faces], [face.landmarks for face in faces], 1.0,
+                       light_groups=(0, 1, 2))
     return target, prepare(target, config, log=FitLog(quiet=True))[0]
 
 
 @pytest.mark.slow
-def test_a_step_on_some_frames_is_the_mean_of_their_frame_terms(three_frames):
-    _, context = three_frames
+def test_a_step_on_some_frames_is_the_mean_of_their_frame_terms(three_photos):
+    _, context = three_photos
     with torch.no_grad():
         stage2.objective(context, before_ace=False, refresh_shadows=True)  # the shadow transfers, once
         whole = float(stage2.objective(context, before_ace=False, refresh_shadows=False))
@@ -75,14 +77,34 @@ def test_a_step_on_some_frames_is_the_mean_of_their_frame_terms(three_frames):
     assert len({round(value, 4) for value in alone}) == 3  # the frames differ, so the test can fail
 
 
-@pytest.mark.slow
-def test_stage2_in_turns_renders_and_shadows_every_frame(three_frames):
-    target, context = three_frames
-    config = override(context.config, **{"iterations.stage2_frames_per_step": 2, "iterations.stage2": 6})
-    log = FitLog(quiet=True)
+def _stage2_frames(target, config, monkeypatch) -> tuple[list[tuple[int, ...]], FitLog, object]:
+    """The frames of each stage-2 step of a fit of ``target``, its log and its context."""
+    log, steps, original = FitLog(quiet=True), [], stage2.objective
+
+    def recorded(*args, frames=None, **kwargs):
+        steps.append(frames)
+        return original(*args, frames=frames, **kwargs)
+
+    monkeypatch.setattr(stage2, "objective", recorded)
     context = prepare(target, config, log=log)[0]
-    before = [cache.refreshes for cache in context.shadow_caches]
     stage2.run_stage2(context)
-    assert all(cache.transfer is not None for cache in context.shadow_caches)
-    assert [cache.refreshes for cache in context.shadow_caches] != before
+    return steps, log, context
+
+
+@pytest.mark.slow
+def test_photos_with_their_own_lights_are_stepped_in_turns_and_all_shadowed(three_photos, monkeypatch):
+    target, context = three_photos
+    config = override(context.config, **{"iterations.stage2_frames_per_step": 2, "iterations.stage2": 6})
+    steps, log, context = _stage2_frames(target, config, monkeypatch)
+    assert all(len(frames) <= 2 for frames in steps) and set(steps[0] + steps[1]) == {0, 1, 2}
+    assert all(cache.transfer is not None and cache.refreshes >= 1 for cache in context.shadow_caches)
     assert any("2 of the 3 frames per step, in turn" in note for note in log.notes)
+
+
+@pytest.mark.slow
+def test_frames_sharing_their_lights_are_all_rendered_at_every_step(three_photos, monkeypatch):
+    target, context = three_photos
+    clip = FitTarget(target.frames_srgb, target.landmarks, 1.0)  # no light groups: a clip's frames
+    config = override(context.config, **{"iterations.stage2_frames_per_step": 2, "iterations.stage2": 4})
+    steps, log, _ = _stage2_frames(clip, config, monkeypatch)
+    assert steps == [(0, 1, 2)] * 4 and not any("in turn" in note for note in log.notes)

@@ -50,6 +50,7 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
     assert changed == {"preset": "deface-mean-skin", "tone.free_tone": False, "tone.scene_light_prior": False,
                        "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3,
                        "iterations.stage2_coarse_share": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
+                       "iterations.stage2_frames_per_step": 0,
                        "iterations.stage3_holdout": 0.0, "weights.diffuse_level": 0.0, "chroma.enabled": False}
 
 

@@ -212,10 +212,14 @@ class Iterations:
     per-pixel work; pose, shape, albedo coefficients, lights and f, g are not tied to the pixel grid); the rest
     refine at the working size: half, as good on the shadow pairs at half the cost (benchmarks/history.md
     "Speed"). 0 = every step at the working size; a share, so `--iterations` keeps it."""
-    stage2_frames_per_step: int = 0
-    """Stage 2 renders at most this many frames per step, a turn of them (deface/fit/frame_turns.py: each round
-    of steps shows every frame once, in a new order), so a step of a many-photo fit or a clip costs no more than
-    this many frames. 0 = every frame at every step."""
+    stage2_frames_per_step: int = 4
+    """Stage 2 renders at most this many photos per step, a turn of them (deface/fit/frame_turns.py: each round
+    of steps shows every photo once, in a new order), when each photo has its own lights (several photos of a
+    person, ``lights.per_photo``), so a step costs no more than this many photos. 4: fits of up to four photos are
+    unchanged; eight photos of one person in two thirds of the time, as close to the truth as with every photo at
+    every step (BENCHMARKS.md `#person-turns`). Frames that share their lights (a clip) are all rendered at every step:
+    shared lights stepped on a turn chase its frames (an 8-frame clip lost 0.7 dB on one of two Blender sets).
+    0 = every frame at every step (the paper)."""
     coarse_min_side: int = 128
     """No half-size steps when the half size would be under this many pixels on its longer side."""
     stage2_tolerance: float = 0.0
@@ -583,6 +587,7 @@ PAPER = {
     "weights.landmark_units": "pixels",
     "weights.diffuse_level": 0.0,
     "iterations.stage2_coarse_share": 0.0,
+    "iterations.stage2_frames_per_step": 0,
     "iterations.stage3_tolerance": 0.0,
     "iterations.stage3_holdout": 0.0,
     "learning_rates.stage3_diffuse_level": 0.0,

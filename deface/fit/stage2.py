@@ -76,9 +76,12 @@ def run_stage2(context: StageContext) -> Stage2Result:
 
 
 def _frame_turns(context: StageContext) -> FrameTurns:
-    """The frames of each step (deface/fit/frame_turns.py), said in the log when a step renders fewer than all."""
+    """The frames of each step (deface/fit/frame_turns.py), said in the log when a step renders fewer than all:
+    in turns only where each photo has its own lights (shared lights stepped on a turn chase its frames)."""
     iterations, frames = context.config.iterations, context.target.num_frames
-    turns = FrameTurns(frames, iterations.stage2_frames_per_step, iterations.shadow_refresh_every, context.config.seed)
+    groups = context.decoupling.light_groups
+    per_step = iterations.stage2_frames_per_step if groups is not None and len(set(groups)) == frames else 0
+    turns = FrameTurns(frames, per_step, iterations.shadow_refresh_every, context.config.seed)
     if not turns.every_step:
         context.log.info(f"stage 2: {turns.per_step} of the {frames} frames per step, in turn")
     return turns
