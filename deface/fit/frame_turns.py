@@ -5,7 +5,9 @@ A fit of many photos or of a clip's frames costs each step once per frame. The u
 albedo coefficients, f, g) need every frame's evidence, but not at every step: an Adam step on a few frames' loss
 is a noisy step on the loss of all of them (stochastic gradient over the frames, as multi-view fits step over
 views). Each round of steps shows every frame once, in a new order: a seeded shuffle split into
-ceil(frames / per_step) near-equal turns, so a fit is repeatable and no frame waits more than two rounds.
+ceil(frames / per_step) near-equal turns, so a fit is repeatable and no frame waits more than two rounds. Stage 2
+takes turns only where each photo has its own lights: lights shared by all frames (a clip) stepped on a turn chase
+its frames (docs/experiments/person-log.md).
 
 A frame's shadow transfer is refreshed at its first render after ``shadow_refresh_every`` steps since its last one
 (with every frame at every step: at steps 0, every, 2 every, ... as before).
