@@ -53,6 +53,5 @@ class FrameTurns:
         return True
 
     def _round(self) -> list[tuple[int, ...]]:
-        order = torch.randperm(self.frames, generator=self._generator).tolist()
-        count = math.ceil(self.frames / self.per_step)
-        return [tuple(sorted(part.tolist())) for part in torch.tensor(order).tensor_split(count)]
+        order = torch.randperm(self.frames, generator=self._generator)
+        return [tuple(sorted(part.tolist())) for part in order.tensor_split(math.ceil(self.frames / self.per_step))]
