@@ -122,6 +122,48 @@ def test_synthetic_video_shares_identity(ict):
     assert result.expression[1, jaw] > result.expression[0, jaw] + 0.2  # the open mouth is in frame 1
 
 
+def _yawed(yaw_degrees: float) -> np.ndarray:
+    """Axis-angle of a frontal upright face (rotation (pi, 0, 0)) turned by ``yaw_degrees`` about its up axis."""
+    from deface.render.camera import axis_angle_to_matrix
+
+    frontal = axis_angle_to_matrix(torch.tensor([math.pi, 0.0, 0.0], dtype=torch.float64)).numpy()
+    turned = frontal @ axis_angle_to_matrix(torch.tensor([0.0, math.radians(yaw_degrees), 0.0],
+                                                          dtype=torch.float64)).numpy()
+    angle = math.acos((np.trace(turned) - 1) / 2)
+    axis = np.array([turned[2, 1] - turned[1, 2], turned[0, 2] - turned[2, 0], turned[1, 0] - turned[0, 1]])
+    return axis / np.linalg.norm(axis) * angle  # angle near pi: the antisymmetric part still gives the axis
+
+
+@pytest.mark.slow
+def test_three_yaws_give_a_shape_closer_than_any_one_of_them(ict):
+    """Issue 59: a head seen at yaw -30, 0 and +30 degrees, each view's landmarks with its own detector noise
+    (5 px per axis on a face of about 300 px). The shape fitted to the three together is closer to the truth at the
+    landmark points (after the best similarity) than the shape fitted to any one of them, on every head."""
+    from deface.eval.albedo_benchmark import similarity_aligned
+
+    corr = correspondence_for(ict)
+    mean, id_basis, _ = landmark_basis(ict, corr)
+
+    def shape_error(truth_identity, fitted_identity) -> float:
+        truth = (mean + np.einsum("k,knc->nc", truth_identity, id_basis)).astype(np.float64)
+        fitted = (mean + np.einsum("k,knc->nc", fitted_identity, id_basis)).astype(np.float64)
+        return float(np.median(np.linalg.norm(similarity_aligned(fitted, truth) - truth, axis=1)))
+
+    rotation = np.stack([_yawed(yaw) for yaw in (-30.0, 0.0, 30.0)])
+    translation = np.tile([0.0, 0.0, 55.0], (3, 1))
+    expression = np.zeros((3, ict.num_expression), np.float32)
+    joint_errors, best_alone = [], []
+    for head in range(3):
+        identity = np.random.default_rng(100 + head).normal(size=ict.num_identity).astype(np.float32) * 0.7
+        _, detections = _synthetic(ict, corr, rotation, translation, identity, expression, noise=5.0, seed=head)
+        alone = [shape_error(identity, fit_landmarks(ict, corr, [d], SIZE).identity) for d in detections]
+        joint = shape_error(identity, fit_landmarks(ict, corr, detections, SIZE).identity)
+        assert joint < min(alone), (head, joint, alone)
+        joint_errors.append(joint)
+        best_alone.append(min(alone))
+    assert np.mean(joint_errors) < 0.9 * np.mean(best_alone)  # not a tie: the views' noise averages out
+
+
 def test_real_photo_fit(ict, photos):
     from deface.io import load_image
     from deface.landmarks.detect import detect_landmarks
