@@ -35,6 +35,7 @@ from deface.texture.chroma import ChromaConfig
 from deface.texture.completion import CompletionConfig
 from deface.texture.pyramid import PyramidConfig
 from deface.texture.registration import RegistrationConfig
+from deface.texture.shade_level import ShadeLevelConfig
 
 __all__ = [  # the value handling lives in config_values; callers import it from here with the schema
     "PAPER", "RENAMED", "CropConfig", "DecoupleConfig", "FitConfig", "Iterations", "LearningRates", "LightConfig",
@@ -485,6 +486,9 @@ class FitConfig:
     registration: RegistrationConfig = field(default_factory=RegistrationConfig)
     """The frames of several photos or a clip brought into register in UV before stage 3
     (deface/texture/registration.py)."""
+    shade_level: ShadeLevelConfig = field(default_factory=ShadeLevelConfig)
+    """The texels the light masks keep in the dark moved to the lit skin's level and colour around them, after
+    stage 3 and before the chroma filter (deface/texture/shade_level.py)."""
     chroma: ChromaConfig = field(default_factory=ChromaConfig)
     """The diffuse map's chroma held to its luminance after stage 3, before completion (deface/texture/chroma.py)."""
     skin_classifier: SkinClassifierConfig = field(default_factory=SkinClassifierConfig)

@@ -31,7 +31,14 @@ from deface.fit.stage2 import Stage2Result, run_stage2
 from deface.fit.stage3 import Stage3Result, render_frozen, run_stage3
 from deface.fit.state import FitInputs, LandmarkTarget, PosedFace, StageContext, first_of_each
 from deface.fit.target import FitTarget, frame_target
-from deface.fit.texels import complete_textures, filtered_chroma, seen_texels, skin_chroma_matched, texture_confidence
+from deface.fit.texels import (
+    complete_textures,
+    filtered_chroma,
+    seen_texels,
+    shade_levelled_textures,
+    skin_chroma_matched,
+    texture_confidence,
+)
 from deface.fit.texture_size import choose_texture_size
 from deface.fit.tone_start import initial_tone, log_tone, supported_tone
 from deface.landmarks.correspondence import correspondence_for
@@ -192,6 +199,8 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
     renders = [render_frozen(context, frame, stage3.textures)[0] for frame in stage3.frozen]
     seen = seen_texels(stage3.views, [rendered.face_region for rendered in renders])
     textures = stage3.textures
+    if context.config.shade_level.enabled:
+        textures = shade_levelled_textures(textures, seen, stage3.views, renders, context.config.shade_level)
     if context.config.chroma.enabled:
         textures = filtered_chroma(textures, seen, stage3.views, context.config.chroma)
     if context.config.completion.enabled:

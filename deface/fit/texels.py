@@ -17,7 +17,8 @@ from deface.models.uvmap import rasterize_uv
 from deface.render.mesh import Textures
 from deface.texture.chroma import ChromaConfig, filter_chroma, skin_chroma_gain, texels_per_pixel
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
-from deface.texture.confidence import TexelView, combine_frames, texel_view
+from deface.texture.confidence import TexelView, combine_frames, texel_view, unwrap
+from deface.texture.shade_level import ShadeLevelConfig, lit_share, shade_levelled
 
 LUMINANCE_T = torch.as_tensor(LUMINANCE, dtype=torch.float32)
 
@@ -57,6 +58,25 @@ def seen_texels(views: list[TexelView], face_regions: list[torch.Tensor]) -> np.
     """[Ht, Wt] in [0, 1]: how squarely some frame saw each texel inside its face region h (no resolution term)."""
     looks = [view.seen(region.detach().numpy()) for view, region in zip(views, face_regions, strict=True)]
     return np.max(np.stack(looks), 0)
+
+
+def light_at_texels(diffuse: np.ndarray, views: list[TexelView], renders: list) -> np.ndarray:
+    """[Ht, Wt] the shading at each texel (the render's luminance over the albedo's, the masks and the geometry's
+    shading and cast shadows in it), in the frame that lights it most; ``diffuse`` [Ht, Wt, 3] the rendered map."""
+    albedo = np.maximum(diffuse @ LUMINANCE, 1e-4)
+    per_frame = [unwrap((rendered.face.detach().numpy() @ LUMINANCE)[..., None], view)[..., 0] / albedo
+                 for view, rendered in zip(views, renders, strict=True)]
+    return np.max(np.stack(per_frame), 0)
+
+
+def shade_levelled_textures(textures: Textures, seen_map: np.ndarray, views: list[TexelView], renders: list,
+                            config: ShadeLevelConfig) -> Textures:
+    """Stage 3's maps with the texels the masks keep in the dark moved to the lit skin's level and colour around
+    them (deface/texture/shade_level.py)."""
+    diffuse = textures.diffuse.detach().numpy()
+    lit = lit_share(light_at_texels(diffuse, views, renders), seen_map, config)
+    diffuse = shade_levelled(diffuse, lit, seen_map, config)
+    return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
 
 
 def filtered_chroma(textures: Textures, seen_map: np.ndarray, views: list[TexelView],

@@ -1,0 +1,95 @@
+"""Texels the light masks keep in the dark take their level and colour from the lit skin around them.
+
+Why: where the masks keep most of the light from a texel, stage 3 reads its albedo as the photo over a dim shading,
+so any error of the masks or the lights there is divided up and painted into the map: a mask a little too dark over
+the upper lids (the eye socket's shading spread over the lid) gives bright yellow crescents above the eyes; a stripe
+of shade whose light has another colour leaves a coloured streak. One photo tells the level and the colour of skin
+in the dark far worse than of the skin beside it in the light.
+
+So, with ``lit`` in [0, 1] how much of the light reaches a texel compared with the face's typical texel (the median
+of the seen texels' unshadowed fraction; 1 from ``high`` of it up, 0 at ``low`` and below), and Gaussian windows of
+``own_radius`` and ``radius`` of the map's side:
+
+    shift = mean_dark(x) - mean_lit(x)            (log luminance and log chromaticity, weights 1 - lit in the
+                                                   small window and lit in the wide one)
+    x' = x - (1 - lit) * shift                     (the luminance part only where it is > 0)
+
+A texel in the dark keeps its own detail (its difference from the dark texels' local mean), and its local mean
+becomes the lit skin's. Its luminance is only ever lowered: a dark texel darker than the lit skin around it may be
+pigment (a beard under a brim), which the masks cannot be trusted to tell from shade, but one brighter than the lit
+skin around it is the masks' error. Its chroma follows the lit skin both ways: skin chroma changes slowly. Where no
+lit texel is near (a shadow wider than the window), nothing changes: ``support`` fades the shift out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from deface.io.images import LUMINANCE
+
+FLOOR = 1e-4  # linear albedo floor before the logs
+
+
+@dataclass(frozen=True)
+class ShadeLevelConfig:
+    """The level and colour of texels in the masks' dark (``FitConfig.shade_level``)."""
+
+    enabled: bool = False
+    """Move the texels the masks keep in the dark to the lit skin's level and colour around them
+    (docs/textures.md "Texels in the dark"); off: stage 3's maps as they are."""
+    radius: float = 0.03
+    """Gaussian sigma of the lit skin's window, as a fraction of the map's side (15 texels at 512²): wider than the
+    crescents and the stripes it corrects."""
+    own_radius: float = 0.01
+    """Gaussian sigma of the dark texels' own window (5 texels at 512²): what varies within it is their detail,
+    kept."""
+    low: float = 0.3
+    """A texel whose unshadowed fraction is this share of the face's median or less counts fully as dark ..."""
+    high: float = 0.8
+    """... and one at this share or more fully as lit."""
+    support: float = 0.2
+    """The lit texels' weight in a window (its share of the seen ones) under which the shift fades out."""
+
+
+def lit_share(light: np.ndarray, seen: np.ndarray, config: ShadeLevelConfig) -> np.ndarray:
+    """[Ht, Wt] in [0, 1]: how lit each texel is against the face's median seen texel. ``light`` [Ht, Wt] is the
+    unshadowed fraction read at each texel, ``seen`` [Ht, Wt] how squarely it was seen (unseen texels: 1)."""
+    trusted = seen >= 0.5
+    if not trusted.any():
+        return np.ones_like(light)
+    reference = max(float(np.median(light[trusted])), 1e-6)
+    share = np.where(seen > 0, np.clip((light / reference - config.low) / (config.high - config.low), 0.0, 1.0), 1.0)
+    sigma = config.own_radius * light.shape[0]  # no seam where the shading steps (a fold of the lids)
+    return np.clip(ndimage.gaussian_filter(share, sigma, mode="nearest"), 0.0, 1.0)
+
+
+def shade_levelled(diffuse: np.ndarray, lit: np.ndarray, seen: np.ndarray, config: ShadeLevelConfig) -> np.ndarray:
+    """``diffuse`` [Ht, Wt, 3] linear, ``lit`` [Ht, Wt] from :func:`lit_share`, ``seen`` [Ht, Wt] -> the map with
+    its dark texels' local level and colour taken from the lit texels around them (module doc)."""
+    size = diffuse.shape[0]
+    rgb = np.maximum(diffuse.astype(np.float64), FLOOR)
+    luminance = rgb @ np.asarray(LUMINANCE, np.float64)
+    values = np.concatenate([np.log(luminance)[..., None], np.log(rgb) - np.log(luminance)[..., None]], -1)
+    weight = (seen > 0).astype(np.float64)
+    dark_weight, lit_weight = weight * (1.0 - lit), weight * lit
+
+    def blur(image: np.ndarray, radius: float) -> np.ndarray:
+        sigma = radius * size
+        return ndimage.gaussian_filter(image, (sigma, sigma) + (0,) * (image.ndim - 2), mode="nearest")
+
+    lit_total, total = blur(lit_weight, config.radius), blur(weight, config.radius)
+    dark_mean = (blur(dark_weight[..., None] * values, config.own_radius)
+                 / np.maximum(blur(dark_weight, config.own_radius), 1e-9)[..., None])
+    lit_mean = blur(lit_weight[..., None] * values, config.radius) / np.maximum(lit_total, 1e-9)[..., None]
+    shift = dark_mean - lit_mean
+    shift[..., 0] = np.maximum(shift[..., 0], 0.0)
+    fade = np.clip(lit_total / np.maximum(total, 1e-9) / config.support, 0.0, 1.0)
+    moved = values - ((1.0 - lit) * fade * weight)[..., None] * shift
+    out = np.exp(moved[..., :1]) * np.exp(moved[..., 1:])
+    out *= (np.exp(moved[..., 0]) / np.maximum(out @ np.asarray(LUMINANCE, np.float64), FLOOR))[..., None]
+    keep = diffuse.max(-1) <= FLOOR  # black texels (outside the layout) stay as they were
+    out[keep] = diffuse[keep]
+    return out.astype(diffuse.dtype)
