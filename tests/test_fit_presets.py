@@ -51,7 +51,8 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
                        "decouple.clipped_as_bound": False, "tone.learning_rate": 0.3,
                        "iterations.stage2_coarse_share": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
                        "iterations.stage2_frames_per_step": 0,
-                       "iterations.stage3_holdout": 0.0, "weights.diffuse_level": 0.0, "chroma.enabled": False}
+                       "iterations.stage3_holdout": 0.0, "weights.diffuse_level": 0.0, "chroma.enabled": False,
+                       "shade_level.enabled": False}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():
@@ -63,6 +64,7 @@ def test_baselines_keep_the_model_mean_skin_and_free_lights():
         assert presets.get(name).weights.smooth_departure == 0.0, name
         assert presets.get(name).iterations.stage3_holdout == 0.0, name
         assert not presets.get(name).chroma.enabled, name
+        assert not presets.get(name).shade_level.enabled, name
 
 
 def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():

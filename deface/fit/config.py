@@ -603,6 +603,7 @@ PAPER = {
     "texture_pyramid.levels": 1,
     "completion.enabled": False,
     "chroma.enabled": False,
+    "shade_level.enabled": False,
     "skin_classifier.occluders.enabled": False,
     "skin_classifier.mouth_opening": False,
     "hands.enabled": False,

@@ -37,9 +37,10 @@ FLOOR = 1e-4  # linear albedo floor before the logs
 class ShadeLevelConfig:
     """The level and colour of texels in the masks' dark (``FitConfig.shade_level``)."""
 
-    enabled: bool = False
-    """Move the texels the masks keep in the dark to the lit skin's level and colour around them
-    (docs/textures.md "Texels in the dark"); off: stage 3's maps as they are."""
+    enabled: bool = True
+    """Move the texels the render lights dimly to the lit skin's level and colour around them (docs/textures.md
+    "Texels in the dark"). Off (the paper's and NextFace's presets, and deface-mean-skin): stage 3's maps as they
+    are."""
     radius: float = 0.03
     """Gaussian sigma of the lit skin's window, as a fraction of the map's side (15 texels at 512²): wider than the
     crescents and the stripes it corrects."""
