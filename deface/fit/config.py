@@ -487,8 +487,8 @@ class FitConfig:
     """The frames of several photos or a clip brought into register in UV before stage 3
     (deface/texture/registration.py)."""
     shade_level: ShadeLevelConfig = field(default_factory=ShadeLevelConfig)
-    """The texels the light masks keep in the dark moved to the lit skin's level and colour around them, after
-    stage 3 and before the chroma filter (deface/texture/shade_level.py)."""
+    """The texels the render lights dimly moved to the lit skin's level and colour around them, after stage 3 and
+    before the chroma filter (deface/texture/shade_level.py)."""
     chroma: ChromaConfig = field(default_factory=ChromaConfig)
     """The diffuse map's chroma held to its luminance after stage 3, before completion (deface/texture/chroma.py)."""
     skin_classifier: SkinClassifierConfig = field(default_factory=SkinClassifierConfig)

@@ -71,8 +71,8 @@ def light_at_texels(diffuse: np.ndarray, views: list[TexelView], renders: list) 
 
 def shade_levelled_textures(textures: Textures, seen_map: np.ndarray, views: list[TexelView], renders: list,
                             config: ShadeLevelConfig) -> Textures:
-    """Stage 3's maps with the texels the masks keep in the dark moved to the lit skin's level and colour around
-    them (deface/texture/shade_level.py)."""
+    """Stage 3's maps with the texels the render lights dimly moved to the lit skin's level and colour around them
+    (deface/texture/shade_level.py)."""
     diffuse = textures.diffuse.detach().numpy()
     lit = lit_share(light_at_texels(diffuse, views, renders), seen_map, config)
     diffuse = shade_levelled(diffuse, lit, seen_map, config)

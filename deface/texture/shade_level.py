@@ -1,13 +1,14 @@
-"""Texels the light masks keep in the dark take their level and colour from the lit skin around them.
+"""Texels the render lights dimly take their level and colour from the lit skin around them.
 
-Why: where the masks keep most of the light from a texel, stage 3 reads its albedo as the photo over a dim shading,
-so any error of the masks or the lights there is divided up and painted into the map: a mask a little too dark over
-the upper lids (the eye socket's shading spread over the lid) gives bright yellow crescents above the eyes; a stripe
-of shade whose light has another colour leaves a coloured streak. One photo tells the level and the colour of skin
-in the dark far worse than of the skin beside it in the light.
+Why: where the render's shading of a texel is dim (the masks keep most of the light from it, or its fitted surface
+faces away from the lights), stage 3 reads its albedo as the photo over that dim shading, so any error of the masks,
+the lights or the surface there is divided up and painted into the map: the eye socket's shading spread over the
+upper lids gives bright yellow crescents above the eyes; a stripe of shade whose light has another colour leaves a
+coloured streak. One photo tells the level and the colour of skin in the dark far worse than of the skin beside it
+in the light.
 
-So, with ``lit`` in [0, 1] how much of the light reaches a texel compared with the face's typical texel (the median
-of the seen texels' unshadowed fraction; 1 from ``high`` of it up, 0 at ``low`` and below), and Gaussian windows of
+So, with ``lit`` in [0, 1] how lit a texel is against the face's typical texel (its shading over the median of the
+seen texels'; 1 from ``high`` of it up, 0 at ``low`` and below; smoothed over ``own_radius``), and Gaussian windows of
 ``own_radius`` and ``radius`` of the map's side:
 
     shift = mean_dark(x) - mean_lit(x)            (log luminance and log chromaticity, weights 1 - lit in the
@@ -17,7 +18,7 @@ of the seen texels' unshadowed fraction; 1 from ``high`` of it up, 0 at ``low`` 
 A texel in the dark keeps its own detail (its difference from the dark texels' local mean), and its local mean
 becomes the lit skin's. Its luminance is only ever lowered: a dark texel darker than the lit skin around it may be
 pigment (a beard under a brim), which the masks cannot be trusted to tell from shade, but one brighter than the lit
-skin around it is the masks' error. Its chroma follows the lit skin both ways: skin chroma changes slowly. Where no
+skin around it is the shading's error. Its chroma follows the lit skin both ways: skin chroma changes slowly. Where no
 lit texel is near (a shadow wider than the window), nothing changes: ``support`` fades the shift out.
 """
 
@@ -35,7 +36,7 @@ FLOOR = 1e-4  # linear albedo floor before the logs
 
 @dataclass(frozen=True)
 class ShadeLevelConfig:
-    """The level and colour of texels in the masks' dark (``FitConfig.shade_level``)."""
+    """The level and colour of the texels the render lights dimly (``FitConfig.shade_level``)."""
 
     enabled: bool = True
     """Move the texels the render lights dimly to the lit skin's level and colour around them (docs/textures.md
@@ -57,7 +58,7 @@ class ShadeLevelConfig:
 
 def lit_share(light: np.ndarray, seen: np.ndarray, config: ShadeLevelConfig) -> np.ndarray:
     """[Ht, Wt] in [0, 1]: how lit each texel is against the face's median seen texel. ``light`` [Ht, Wt] is the
-    unshadowed fraction read at each texel, ``seen`` [Ht, Wt] how squarely it was seen (unseen texels: 1)."""
+    shading at each texel, ``seen`` [Ht, Wt] how squarely it was seen (unseen texels: 1)."""
     trusted = seen >= 0.5
     if not trusted.any():
         return np.ones_like(light)
