@@ -49,7 +49,7 @@ class ShadeLevelConfig:
     """Gaussian sigma of the dark texels' own window (5 texels at 512²): what varies within it is their detail,
     kept."""
     low: float = 0.3
-    """A texel whose unshadowed fraction is this share of the face's median or less counts fully as dark ..."""
+    """A texel whose shading is this share of the face's median or less counts fully as dark ..."""
     high: float = 0.8
     """... and one at this share or more fully as lit."""
     support: float = 0.2
