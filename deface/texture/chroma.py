@@ -40,8 +40,10 @@ class ChromaConfig:
     enabled: bool = True
     """Filter the diffuse map's chroma (docs/textures.md "Chroma"). Off (the paper's and NextFace's presets, and
     deface-mean-skin): stage 3's map as it is."""
-    radius: float = 0.008
-    """Window half-side as a fraction of the map's side (4 texels at 512²): the scale of the colour noise removed."""
+    radius: float = 0.016
+    """Window half-side as a fraction of the map's side (8 texels at 512², about 4 pixels of a 512-px crop): the
+    scale of the colour noise removed (0.008 before 2026-11-29: the board's colour noise at the working size 14-22 %
+    higher, its synthesis the same)."""
     pixels: float = 2.0
     """Least window half-side in the photos' pixels (the module doc: a photo's colour has half its resolution),
     read in texels from how many texels a photo pixel spans on the face (:func:`texels_per_pixel`). At the
