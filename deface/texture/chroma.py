@@ -85,16 +85,32 @@ def skin_chroma_gain(diffuse: np.ndarray, skin_texels: np.ndarray, skin: np.ndar
     return gain * (median @ luminance) / ((median * gain) @ luminance)
 
 
+def log_parts(diffuse: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``diffuse`` [Ht, Wt, 3] linear -> (luminance Y [Ht, Wt], log Y [Ht, Wt], log-chromaticity log(X / Y)
+    [Ht, Wt, 3]), in float64, the albedo floored at ``FLOOR`` before the logs."""
+    rgb = np.maximum(diffuse.astype(np.float64), FLOOR)
+    luminance = rgb @ np.asarray(LUMINANCE, np.float64)
+    log_luminance = np.log(luminance)
+    return luminance, log_luminance, np.log(rgb) - log_luminance[..., None]
+
+
+def from_log_parts(luminance: np.ndarray, chroma: np.ndarray, diffuse: np.ndarray) -> np.ndarray:
+    """The map of ``luminance`` [Ht, Wt] (linear, kept exactly) and log-chromaticity ``chroma`` [Ht, Wt, 3], in
+    ``diffuse``'s dtype; ``diffuse``'s black texels (outside the layout) stay as they were."""
+    out = luminance[..., None] * np.exp(chroma)
+    out *= (luminance / np.maximum(out @ np.asarray(LUMINANCE, np.float64), FLOOR))[..., None]
+    keep = diffuse.max(-1) <= FLOOR
+    out[keep] = diffuse[keep]
+    return out.astype(diffuse.dtype)
+
+
 def filter_chroma(diffuse: np.ndarray, weight: np.ndarray, config: ChromaConfig,
                   texels_a_pixel: float = 0.0) -> np.ndarray:
     """``diffuse`` [Ht, Wt, 3] linear, ``weight`` [Ht, Wt] >= 0 (how well each texel was seen) -> the map with its
     chroma guided by its luminance; every texel's luminance unchanged (module doc). ``texels_a_pixel``: how many
     texels a photo pixel spans (:func:`texels_per_pixel`; 0: the window is ``config.radius`` alone)."""
     size = window_side(config, diffuse.shape[0], texels_a_pixel)
-    rgb = np.maximum(diffuse.astype(np.float64), FLOOR)
-    luminance = rgb @ np.asarray(LUMINANCE, np.float64)
-    guide = np.log(luminance)
-    chroma = np.log(rgb) - guide[..., None]  # [Ht, Wt, 3]
+    luminance, guide, chroma = log_parts(diffuse)
     w = np.asarray(weight, np.float64) + 1e-6
     total = _box(w, size)
 
@@ -107,9 +123,4 @@ def filter_chroma(diffuse: np.ndarray, weight: np.ndarray, config: ChromaConfig,
     cov = mean(guide[..., None] * chroma) - mean_g[..., None] * mean_c
     a = cov / (np.maximum(var_g, 0.0) + config.eps)[..., None]
     b = mean_c - a * mean_g[..., None]
-    filtered = mean(a) * guide[..., None] + mean(b)
-    out = luminance[..., None] * np.exp(filtered)
-    out *= (luminance / np.maximum(out @ np.asarray(LUMINANCE, np.float64), FLOOR))[..., None]
-    keep = diffuse.max(-1) <= FLOOR  # black texels (outside the layout) stay as they were
-    out[keep] = diffuse[keep]
-    return out.astype(diffuse.dtype)
+    return from_log_parts(luminance, mean(a) * guide[..., None] + mean(b), diffuse)

@@ -29,9 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from deface.io.images import LUMINANCE
-
-FLOOR = 1e-4  # linear albedo floor before the logs
+from deface.texture.chroma import from_log_parts, log_parts
 
 
 @dataclass(frozen=True)
@@ -72,9 +70,8 @@ def shade_levelled(diffuse: np.ndarray, lit: np.ndarray, seen: np.ndarray, confi
     """``diffuse`` [Ht, Wt, 3] linear, ``lit`` [Ht, Wt] from :func:`lit_share`, ``seen`` [Ht, Wt] -> the map with
     its dark texels' local level and colour taken from the lit texels around them (module doc)."""
     size = diffuse.shape[0]
-    rgb = np.maximum(diffuse.astype(np.float64), FLOOR)
-    luminance = rgb @ np.asarray(LUMINANCE, np.float64)
-    values = np.concatenate([np.log(luminance)[..., None], np.log(rgb) - np.log(luminance)[..., None]], -1)
+    _, log_luminance, chroma = log_parts(diffuse)
+    values = np.concatenate([log_luminance[..., None], chroma], -1)
     weight = (seen > 0).astype(np.float64)
     dark_weight, lit_weight = weight * (1.0 - lit), weight * lit
 
@@ -90,8 +87,4 @@ def shade_levelled(diffuse: np.ndarray, lit: np.ndarray, seen: np.ndarray, confi
     shift[..., 0] = np.maximum(shift[..., 0], 0.0)
     fade = np.clip(lit_total / np.maximum(total, 1e-9) / config.support, 0.0, 1.0)
     moved = values - ((1.0 - lit) * fade * weight)[..., None] * shift
-    out = np.exp(moved[..., :1]) * np.exp(moved[..., 1:])
-    out *= (np.exp(moved[..., 0]) / np.maximum(out @ np.asarray(LUMINANCE, np.float64), FLOOR))[..., None]
-    keep = diffuse.max(-1) <= FLOOR  # black texels (outside the layout) stay as they were
-    out[keep] = diffuse[keep]
-    return out.astype(diffuse.dtype)
+    return from_log_parts(np.exp(moved[..., 0]), moved[..., 1:], diffuse)
