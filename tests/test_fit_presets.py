@@ -52,7 +52,7 @@ def test_mean_skin_is_deface_without_the_skin_tone_work():
                        "iterations.stage2_coarse_share": 0.0, "learning_rates.stage3_diffuse_level": 0.0,
                        "iterations.stage2_frames_per_step": 0,
                        "iterations.stage3_holdout": 0.0, "weights.diffuse_level": 0.0, "chroma.enabled": False,
-                       "shade_level.enabled": False}
+                       "shade_level.enabled": False, "pigment_gamut.enabled": False}
 
 
 def test_baselines_keep_the_model_mean_skin_and_free_lights():
@@ -65,6 +65,7 @@ def test_baselines_keep_the_model_mean_skin_and_free_lights():
         assert presets.get(name).iterations.stage3_holdout == 0.0, name
         assert not presets.get(name).chroma.enabled, name
         assert not presets.get(name).shade_level.enabled, name
+        assert not presets.get(name).pigment_gamut.enabled, name
 
 
 def test_every_preset_renders_stage_3_antialiased_without_the_loss_blur():

@@ -33,6 +33,7 @@ from deface.priors.shading_evidence import ShadingEvidenceConfig
 from deface.render.renderer import RenderConfig
 from deface.texture.chroma import ChromaConfig
 from deface.texture.completion import CompletionConfig
+from deface.texture.pigment_gamut import PigmentGamutConfig
 from deface.texture.pyramid import PyramidConfig
 from deface.texture.registration import RegistrationConfig
 from deface.texture.shade_level import ShadeLevelConfig
@@ -491,6 +492,9 @@ class FitConfig:
     before the chroma filter (deface/texture/shade_level.py)."""
     chroma: ChromaConfig = field(default_factory=ChromaConfig)
     """The diffuse map's chroma held to its luminance after stage 3, before completion (deface/texture/chroma.py)."""
+    pigment_gamut: PigmentGamutConfig = field(default_factory=PigmentGamutConfig)
+    """The diffuse map's hues held to those of skin, hair and lip pigments, after the chroma filter and before
+    completion (deface/texture/pigment_gamut.py)."""
     skin_classifier: SkinClassifierConfig = field(default_factory=SkinClassifierConfig)
     """The offline face-region classifier h (deface/priors/face_region.py), used without BiSeNet's weights."""
     hands: HandConfig = field(default_factory=HandConfig)
@@ -604,6 +608,7 @@ PAPER = {
     "completion.enabled": False,
     "chroma.enabled": False,
     "shade_level.enabled": False,
+    "pigment_gamut.enabled": False,
     "skin_classifier.occluders.enabled": False,
     "skin_classifier.mouth_opening": False,
     "hands.enabled": False,

@@ -34,6 +34,7 @@ from deface.fit.target import FitTarget, frame_target
 from deface.fit.texels import (
     complete_textures,
     filtered_chroma,
+    pigment_gamut_textures,
     seen_texels,
     shade_levelled_textures,
     skin_chroma_matched,
@@ -203,6 +204,8 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
         textures = shade_levelled_textures(textures, seen, stage3.views, renders, context.config.shade_level)
     if context.config.chroma.enabled:
         textures = filtered_chroma(textures, seen, stage3.views, context.config.chroma)
+    if context.config.pigment_gamut.enabled:
+        textures = pigment_gamut_textures(textures, seen, context.config.pigment_gamut)
     if context.config.completion.enabled:
         textures = complete_textures(context.model, textures, stage3.initial, seen, context.config.completion)
     light = context.inputs.scene_light

@@ -68,9 +68,9 @@ PRESETS: dict[str, dict] = {
     "deface": {},
     # `deface` before it kept the tone (the earlier default): the model's mean skin with free lights, L_pho's clipped
     # channels as values, no half-size stage-2 steps nor turns of frames, no held-out pixels, one diffuse step and
-    # absolute diffuse terms, no chroma filter nor texels in the dark moved to the lit skin.
-    "deface-mean-skin": {"chroma.enabled": False, "shade_level.enabled": False, "tone.free_tone": False,
-                         "tone.scene_light_prior": False, "tone.learning_rate": 0.3,
+    # absolute diffuse terms, no chroma filter, texels in the dark moved to the lit skin nor pigment hues.
+    "deface-mean-skin": {"chroma.enabled": False, "shade_level.enabled": False, "pigment_gamut.enabled": False,
+                         "tone.free_tone": False, "tone.scene_light_prior": False, "tone.learning_rate": 0.3,
                          "decouple.clipped_as_bound": False, "iterations.stage2_coarse_share": 0.0,
                          "iterations.stage2_frames_per_step": 0,
                          "iterations.stage3_holdout": 0.0, "learning_rates.stage3_diffuse_level": 0.0,

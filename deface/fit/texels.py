@@ -18,6 +18,7 @@ from deface.render.mesh import Textures
 from deface.texture.chroma import ChromaConfig, filter_chroma, skin_chroma_gain, texels_per_pixel
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
 from deface.texture.confidence import TexelView, combine_frames, texel_view, unwrap
+from deface.texture.pigment_gamut import PigmentGamutConfig, in_pigment_gamut
 from deface.texture.shade_level import ShadeLevelConfig, lit_share, shade_levelled
 
 LUMINANCE_T = torch.as_tensor(LUMINANCE, dtype=torch.float32)
@@ -86,6 +87,12 @@ def filtered_chroma(textures: Textures, seen_map: np.ndarray, views: list[TexelV
     density = np.max([view.density for view in views], axis=0)
     diffuse = filter_chroma(textures.diffuse.detach().numpy(), seen_map, config,
                             texels_per_pixel(density, seen_map))
+    return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
+
+
+def pigment_gamut_textures(textures: Textures, seen_map: np.ndarray, config: PigmentGamutConfig) -> Textures:
+    """The maps with the diffuse map's hues held to the pigments' gamut (deface/texture/pigment_gamut.py)."""
+    diffuse = in_pigment_gamut(textures.diffuse.detach().numpy(), seen_map, config)
     return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
 
 
