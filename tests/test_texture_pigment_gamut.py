@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from deface.io.images import LUMINANCE
 from deface.texture.chroma import log_parts
@@ -93,3 +94,17 @@ def test_unseen_texels_give_no_chroma_and_black_texels_stay_black():
     u = np.log(out[right][:, 0] / out[right][:, 1])
     assert np.abs(u.mean() - np.log(SKIN[0] / SKIN[1])) < 0.05  # the seen skin's red, not the unseen half's
     np.testing.assert_array_equal(out[0:4, 0:4], 0.0)
+
+
+def test_the_window_takes_the_skin_not_the_fringe_just_inside_the_gamut():
+    """A green patch ringed by olive texels (red = green: on the gamut's edge) takes the skin's chroma beyond."""
+    skin, patch = _skin(), _patch()
+    spoiled = skin.copy()
+    ring = ndimage.binary_dilation(patch, iterations=2) & ~patch
+    spoiled[ring] = skin[ring].mean(-1, keepdims=True) * np.array([1.0, 1.0, 0.6], np.float32)  # olive: u = 0
+    spoiled[patch] = skin[patch] * 0.4 * np.array([0.6, 1.3, 1.0], np.float32)
+    out = in_pigment_gamut(spoiled, SEEN, PigmentGamutConfig(radius=0.05))  # a window wider than patch and ring
+    inner = np.zeros_like(patch)
+    inner[44:52, 36:60] = True
+    red_over_green = np.log(out[inner][:, 0] / out[inner][:, 1]).mean()
+    assert abs(red_over_green - np.log(SKIN[0] / SKIN[1])) < 0.05  # the skin's, not the ring's 0

@@ -10,7 +10,8 @@ tell a light's colour from the albedo's, but it can tell that no face is teal.
 So, in log chromaticity, with u = log(R / G) and v = log(sqrt(R G) / B) (the gamut is u >= 0 and v >= 0):
 - a texel outside by ``excess`` (its distance to the gamut in (u, v)) takes the chroma of the in-gamut texels
   around it (a Gaussian window of ``radius`` of the map's side), by min(excess / ``ramp``, 1): far outside, all of
-  it; at the edge, little;
+  it; at the edge, little. The window weighs a texel by how far inside it is, min(u, v) / ``ramp`` up to 1: the
+  texels just inside beside a green patch are the patch's fringe (olive), not the skin;
 - then what is still outside (no in-gamut texel near) is moved to the gamut's edge: red raised to green, blue
   lowered to yellow.
 Every texel's luminance is kept, so a beard stays as dark as it was; only its hue changes. In-gamut texels are not
@@ -39,9 +40,10 @@ class PigmentGamutConfig:
     radius: float = 0.02
     """Gaussian sigma of the window whose in-gamut texels give an outside texel its chroma, as a fraction of the
     map's side (10 texels at 512²): wider than a beard's strands, narrower than the face's features."""
-    ramp: float = 0.1
-    """Distance outside the gamut (natural log of a channel ratio: 10 %) at which a texel takes all of its window's
-    chroma; nearer the edge, a share in proportion."""
+    ramp: float = 0.05
+    """Distance outside the gamut (natural log of a channel ratio: 5 %) at which a texel takes all of its window's
+    chroma, nearer the edge a share in proportion; and the depth inside at which a texel counts fully in the
+    window (skin is 0.25 or more inside on every texel of the truth renders)."""
 
 
 def hue_coordinates(chroma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -64,7 +66,8 @@ def in_pigment_gamut(diffuse: np.ndarray, seen: np.ndarray, config: PigmentGamut
     excess = gamut_excess(chroma)
     if not (excess > 0).any():
         return diffuse
-    inside = ((excess == 0) & (seen > 0)).astype(np.float64)
+    u, v = hue_coordinates(chroma)
+    inside = np.clip(np.minimum(u, v) / config.ramp, 0.0, 1.0) * (seen > 0)
     sigma = config.radius * diffuse.shape[0]
     total = ndimage.gaussian_filter(inside, sigma, mode="nearest")
     window = np.stack([ndimage.gaussian_filter(inside * chroma[..., c], sigma, mode="nearest") for c in range(3)], -1)
