@@ -7,7 +7,7 @@ from scipy import ndimage
 
 from deface.io.images import LUMINANCE
 from deface.texture.chroma import log_parts
-from deface.texture.pigment_gamut import PigmentGamutConfig, gamut_excess, in_pigment_gamut
+from deface.texture.pigment_gamut import PigmentGamutConfig, gamut_excess, in_pigment_gamut, outside_share
 
 SIZE = 96
 SKIN = np.array([0.45, 0.30, 0.22])
@@ -108,3 +108,15 @@ def test_the_window_takes_the_skin_not_the_fringe_just_inside_the_gamut():
     inner[44:52, 36:60] = True
     red_over_green = np.log(out[inner][:, 0] / out[inner][:, 1]).mean()
     assert abs(red_over_green - np.log(SKIN[0] / SKIN[1])) < 0.05  # the skin's, not the ring's 0
+
+
+def test_the_share_outside_counts_seen_texels_only():
+    skin, patch = _skin(), _patch()
+    assert outside_share(skin, SEEN) == 0.0
+    spoiled = skin.copy()
+    spoiled[patch] *= np.array([0.6, 1.3, 1.0], np.float32)
+    assert outside_share(spoiled, SEEN) == patch.mean()
+    seen = SEEN.copy()
+    seen[patch] = 0
+    assert outside_share(spoiled, seen) == 0.0
+    assert outside_share(spoiled, np.zeros_like(SEEN)) == 0.0

@@ -205,7 +205,7 @@ def finish_textures(context: StageContext, stage3: Stage3Result) -> FinishedText
     if context.config.chroma.enabled:
         textures = filtered_chroma(textures, seen, stage3.views, context.config.chroma)
     if context.config.pigment_gamut.enabled:
-        textures = pigment_gamut_textures(textures, seen, context.config.pigment_gamut)
+        textures = pigment_gamut_textures(textures, seen, context.config.pigment_gamut, context.log)
     if context.config.completion.enabled:
         textures = complete_textures(context.model, textures, stage3.initial, seen, context.config.completion)
     light = context.inputs.scene_light

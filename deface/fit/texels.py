@@ -18,7 +18,7 @@ from deface.render.mesh import Textures
 from deface.texture.chroma import ChromaConfig, filter_chroma, skin_chroma_gain, texels_per_pixel
 from deface.texture.completion import CompletionConfig, complete_map, layout_regions
 from deface.texture.confidence import TexelView, combine_frames, texel_view, unwrap
-from deface.texture.pigment_gamut import PigmentGamutConfig, in_pigment_gamut
+from deface.texture.pigment_gamut import PigmentGamutConfig, in_pigment_gamut, outside_share
 from deface.texture.shade_level import ShadeLevelConfig, lit_share, shade_levelled
 
 LUMINANCE_T = torch.as_tensor(LUMINANCE, dtype=torch.float32)
@@ -90,9 +90,17 @@ def filtered_chroma(textures: Textures, seen_map: np.ndarray, views: list[TexelV
     return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
 
 
-def pigment_gamut_textures(textures: Textures, seen_map: np.ndarray, config: PigmentGamutConfig) -> Textures:
-    """The maps with the diffuse map's hues held to the pigments' gamut (deface/texture/pigment_gamut.py)."""
-    diffuse = in_pigment_gamut(textures.diffuse.detach().numpy(), seen_map, config)
+def pigment_gamut_textures(textures: Textures, seen_map: np.ndarray, config: PigmentGamutConfig,
+                           log) -> Textures:
+    """The maps with the diffuse map's hues held to the pigments' gamut (deface/texture/pigment_gamut.py); the share
+    of seen texels that were outside it said in ``log``."""
+    diffuse = textures.diffuse.detach().numpy()
+    share = outside_share(diffuse, seen_map)
+    if share > 0:
+        log.info(f"{100 * share:.1f} % of the seen texels had a hue no skin, hair or lip pigment makes (a light's "
+                 "colour left in the map): they took the skin's around them (pigment_gamut.enabled=false keeps them, "
+                 "for blue, green or violet make-up)")
+    diffuse = in_pigment_gamut(diffuse, seen_map, config)
     return Textures(torch.from_numpy(diffuse), textures.specular, textures.roughness)
 
 

@@ -59,6 +59,15 @@ def gamut_excess(chroma: np.ndarray) -> np.ndarray:
     return np.hypot(np.minimum(u, 0.0), np.minimum(v, 0.0))
 
 
+def outside_share(diffuse: np.ndarray, seen: np.ndarray) -> float:
+    """The share of the seen texels (``seen`` [Ht, Wt] > 0) of ``diffuse`` [Ht, Wt, 3] whose hue lies outside the
+    pigments' gamut (0 when none was seen)."""
+    shown = seen > 0
+    if not shown.any():
+        return 0.0
+    return float((gamut_excess(log_parts(diffuse)[2]) > 0)[shown].mean())
+
+
 def in_pigment_gamut(diffuse: np.ndarray, seen: np.ndarray, config: PigmentGamutConfig) -> np.ndarray:
     """``diffuse`` [Ht, Wt, 3] linear, ``seen`` [Ht, Wt] (> 0: a photo showed the texel) -> the map with every
     texel's hue within the pigments' gamut and its luminance unchanged (module doc)."""
