@@ -96,7 +96,7 @@ def pigment_gamut_textures(textures: Textures, seen_map: np.ndarray, config: Pig
     of seen texels that were outside it said in ``log``."""
     diffuse = textures.diffuse.detach().numpy()
     share = outside_share(diffuse, seen_map)
-    if share > 0:
+    if share >= 0.0005:  # said from 0.1 % up
         log.info(f"{100 * share:.1f} % of the seen texels had a hue no skin, hair or lip pigment makes (a light's "
                  "colour left in the map): they took the skin's around them (pigment_gamut.enabled=false keeps them, "
                  "for blue, green or violet make-up)")
