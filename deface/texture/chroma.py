@@ -104,6 +104,13 @@ def from_log_parts(luminance: np.ndarray, chroma: np.ndarray, diffuse: np.ndarra
     return out.astype(diffuse.dtype)
 
 
+def map_gaussian(image: np.ndarray, radius: float) -> np.ndarray:
+    """``image`` [Ht, Wt] or [Ht, Wt, C] blurred over the map's two axes by a Gaussian of sigma ``radius`` of its side
+    (channels apart, edges repeated): the local windows of the texel steps after stage 3."""
+    sigma = radius * image.shape[0]
+    return ndimage.gaussian_filter(image, (sigma, sigma) + (0,) * (image.ndim - 2), mode="nearest")
+
+
 def filter_chroma(diffuse: np.ndarray, weight: np.ndarray, config: ChromaConfig,
                   texels_a_pixel: float = 0.0) -> np.ndarray:
     """``diffuse`` [Ht, Wt, 3] linear, ``weight`` [Ht, Wt] >= 0 (how well each texel was seen) -> the map with its

@@ -24,9 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
-from deface.texture.chroma import from_log_parts, log_parts
+from deface.texture.chroma import from_log_parts, log_parts, map_gaussian
 
 
 @dataclass(frozen=True)
@@ -77,10 +76,8 @@ def in_pigment_gamut(diffuse: np.ndarray, seen: np.ndarray, config: PigmentGamut
         return diffuse
     u, v = hue_coordinates(chroma)
     inside = np.clip(np.minimum(u, v) / config.ramp, 0.0, 1.0) * (seen > 0)
-    sigma = config.radius * diffuse.shape[0]
-    total = ndimage.gaussian_filter(inside, sigma, mode="nearest")
-    window = np.stack([ndimage.gaussian_filter(inside * chroma[..., c], sigma, mode="nearest") for c in range(3)], -1)
-    window /= np.maximum(total, 1e-9)[..., None]
+    total = map_gaussian(inside, config.radius)
+    window = map_gaussian(inside[..., None] * chroma, config.radius) / np.maximum(total, 1e-9)[..., None]
     share = np.clip(excess / config.ramp, 0.0, 1.0) * (total > 1e-6)
     moved = chroma + share[..., None] * (window - chroma)
     return from_log_parts(luminance, onto_gamut(moved), diffuse)

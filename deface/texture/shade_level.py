@@ -27,9 +27,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
-from deface.texture.chroma import from_log_parts, log_parts
+from deface.texture.chroma import from_log_parts, log_parts, map_gaussian
 
 
 @dataclass(frozen=True)
@@ -62,27 +61,20 @@ def lit_share(light: np.ndarray, seen: np.ndarray, config: ShadeLevelConfig) -> 
         return np.ones_like(light)
     reference = max(float(np.median(light[trusted])), 1e-6)
     share = np.where(seen > 0, np.clip((light / reference - config.low) / (config.high - config.low), 0.0, 1.0), 1.0)
-    sigma = config.own_radius * light.shape[0]  # no seam where the shading steps (a fold of the lids)
-    return np.clip(ndimage.gaussian_filter(share, sigma, mode="nearest"), 0.0, 1.0)
+    return np.clip(map_gaussian(share, config.own_radius), 0.0, 1.0)  # no seam where the shading steps (a lid's fold)
 
 
 def shade_levelled(diffuse: np.ndarray, lit: np.ndarray, seen: np.ndarray, config: ShadeLevelConfig) -> np.ndarray:
     """``diffuse`` [Ht, Wt, 3] linear, ``lit`` [Ht, Wt] from :func:`lit_share`, ``seen`` [Ht, Wt] -> the map with
     its dark texels' local level and colour taken from the lit texels around them (module doc)."""
-    size = diffuse.shape[0]
     _, log_luminance, chroma = log_parts(diffuse)
     values = np.concatenate([log_luminance[..., None], chroma], -1)
     weight = (seen > 0).astype(np.float64)
     dark_weight, lit_weight = weight * (1.0 - lit), weight * lit
-
-    def blur(image: np.ndarray, radius: float) -> np.ndarray:
-        sigma = radius * size
-        return ndimage.gaussian_filter(image, (sigma, sigma) + (0,) * (image.ndim - 2), mode="nearest")
-
-    lit_total, total = blur(lit_weight, config.radius), blur(weight, config.radius)
-    dark_mean = (blur(dark_weight[..., None] * values, config.own_radius)
-                 / np.maximum(blur(dark_weight, config.own_radius), 1e-9)[..., None])
-    lit_mean = blur(lit_weight[..., None] * values, config.radius) / np.maximum(lit_total, 1e-9)[..., None]
+    lit_total, total = map_gaussian(lit_weight, config.radius), map_gaussian(weight, config.radius)
+    dark_mean = (map_gaussian(dark_weight[..., None] * values, config.own_radius)
+                 / np.maximum(map_gaussian(dark_weight, config.own_radius), 1e-9)[..., None])
+    lit_mean = map_gaussian(lit_weight[..., None] * values, config.radius) / np.maximum(lit_total, 1e-9)[..., None]
     shift = dark_mean - lit_mean
     shift[..., 0] = np.maximum(shift[..., 0], 0.0)
     fade = np.clip(lit_total / np.maximum(total, 1e-9) / config.support, 0.0, 1.0)
