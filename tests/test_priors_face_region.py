@@ -232,16 +232,18 @@ def test_beard_zone_is_the_lower_face_below_the_nose(photos):
     assert not beard_zone_mask(points[:68], image.shape[:2]).any()  # not a MediaPipe layout: no zone
 
 
-@pytest.mark.parametrize("mouth_opening", [True, False])
-def test_bisenet_leaves_the_mouths_opening_out_as_the_skin_classifier_does(parser_checkpoint, tmp_path, monkeypatch,
-                                                                           mouth_opening):
-    from deface.priors.bisenet import MOUTH_CLASS, PARSER_RELATIVE
+@pytest.mark.parametrize(("mouth_opening", "eye_opening"), [(True, True), (False, True), (True, False)])
+def test_bisenet_leaves_the_openings_out_as_the_skin_classifier_does(parser_checkpoint, tmp_path, monkeypatch,
+                                                                     mouth_opening, eye_opening):
+    from deface.priors.bisenet import EYE_CLASSES, MOUTH_CLASS, PARSER_RELATIVE
 
     target = tmp_path / PARSER_RELATIVE[0]
     target.parent.mkdir(parents=True, exist_ok=True)
     target.write_bytes(parser_checkpoint.read_bytes())
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    parser, description = load_face_region_classifier(tmp_path, skin=SkinClassifierConfig(mouth_opening=mouth_opening))
+    skin = SkinClassifierConfig(mouth_opening=mouth_opening, eye_opening=eye_opening)
+    parser, description = load_face_region_classifier(tmp_path, skin=skin)
     assert isinstance(parser, BiSeNetFaceParser) and "BiSeNet" in description
     assert (MOUTH_CLASS in parser.face_classes) != mouth_opening
-    assert set(parser.face_classes) | {MOUTH_CLASS} == set(FACE_CLASSES)
+    assert all((eye in parser.face_classes) != eye_opening for eye in EYE_CLASSES)
+    assert set(parser.face_classes) | {MOUTH_CLASS, *EYE_CLASSES} == set(FACE_CLASSES)

@@ -15,7 +15,7 @@ from deface.priors.face_region import (
     _hull_mask,
     feature_mask_from_landmarks,
 )
-from deface.priors.occluders import OccluderConfig, darkness, thin_structures
+from deface.priors.occluders import OccluderConfig, darkness, disk, thin_structures
 
 
 def test_darkness_is_the_log_ratio_to_the_surroundings_on_thin_lines_only():
@@ -203,6 +203,28 @@ def test_the_mouths_opening_leaves_h_and_the_lips_stay(photos):
     assert h[opening].max() == 0.0 and kept[opening].mean() > 0.9
     assert h[band].mean() > 0.9
     assert not mouth_opening_mask(points[:68], shape).any()  # not a MediaPipe layout
+
+
+def test_the_eyes_openings_leave_h_and_the_lids_stay(photos):
+    """Open eyes: between the lid margins (the white, the iris, the inner corner) is not the face's surface (h 0);
+    the lids and the rest of h are as without it beyond the blur's reach; with ``eye_opening`` off the eyes' hulls
+    keep the opening as face."""
+    from deface.priors.face_region import eye_openings_mask
+
+    image, points = _face(photos)
+    shape = image.shape[:2]
+    openings = eye_openings_mask(points, shape)
+    eyes = np.zeros(shape, bool)
+    for name in ("left_eye", "right_eye"):
+        eyes |= _hull_mask(points[list(MEDIAPIPE_FEATURES[name])], shape)
+    assert openings.sum() > 0.8 * eyes.sum()  # the photo's eyes are open; the polygon is the hull, nearly
+    coverage = cv2.dilate(_hull_mask(points, shape).astype(np.uint8), np.ones((15, 15), np.uint8))
+    h = SkinColourClassifier()(image, coverage.astype(np.float32), points)
+    kept = SkinColourClassifier(SkinClassifierConfig(eye_opening=False))(image, coverage.astype(np.float32), points)
+    assert h[openings].max() == 0.0 and kept[openings].mean() > 0.9
+    beyond = ~cv2.dilate(openings.astype(np.uint8), disk(4)).astype(bool)
+    assert np.abs(h - kept)[beyond].max() < 0.05
+    assert not eye_openings_mask(points[:68], shape).any()  # not a MediaPipe layout
 
 
 def test_a_beards_edge_past_the_outline_is_not_taken_for_an_occluder(photos):

@@ -611,6 +611,7 @@ PAPER = {
     "pigment_gamut.enabled": False,
     "skin_classifier.occluders.enabled": False,
     "skin_classifier.mouth_opening": False,
+    "skin_classifier.eye_opening": False,
     "hands.enabled": False,
     "skin_classifier.beard_zone": False,
     "skin_classifier.hull_margin": 0.0,

@@ -38,6 +38,9 @@ same, deface/priors/occluders.py)."""
 MOUTH_CLASS = 11
 """The mouth's opening (teeth, tongue, between the inner lips), left out of h with
 ``SkinClassifierConfig.mouth_opening`` (the default; the paper counts it as face)."""
+EYE_CLASSES = (4, 5)
+"""The eyes' openings (between the lids), left out of h with ``SkinClassifierConfig.eye_opening`` (the default;
+the paper counts them as face)."""
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 

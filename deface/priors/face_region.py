@@ -25,7 +25,8 @@ Limits: colour only. Hair, beards, hats or hands whose chroma is close to skin (
 coloured fabric) are kept as face; very dark regions (deep shadow next to black hair) are judged from their
 surroundings; strongly coloured light (a red lamp on half the face) shifts chroma beyond the skin model; the
 region never extends beyond the coverage. Thin dark structures (glasses frames, strands of hair) and tinted lenses
-are found by their shape (deface/priors/occluders.py) and left out.
+are found by their shape (deface/priors/occluders.py) and left out, and so are the openings between the inner lips
+and between the lids (``mouth_opening``, ``eye_opening``): not the face's surface.
 """
 
 from __future__ import annotations
@@ -55,6 +56,9 @@ MEDIAPIPE_FACE_OVAL = (10, 21, 54, 58, 67, 93, 103, 109, 127, 132, 136, 148, 149
                        284, 288, 297, 323, 332, 338, 356, 361, 365, 377, 378, 379, 389, 397, 400, 454)
 MEDIAPIPE_NOSE_BASE = (2, 98, 327)  # subnasale and the alae's bases: the beard zone's top
 MEDIAPIPE_CHIN = 152
+MEDIAPIPE_LID_MARGINS = ((33, 7, 163, 144, 145, 153, 154, 155, 133, 173, 157, 158, 159, 160, 161, 246),
+                         (263, 249, 390, 373, 374, 380, 381, 382, 362, 398, 384, 385, 386, 387, 388, 466))
+"""Each eye's contour along its lid margins, in order round the opening (the right eye's, then the left's)."""
 MEDIAPIPE_INNER_LIPS = (78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308, 324, 318, 402, 317, 14, 87, 178, 88, 95)
 """The inner lip contour in order around the mouth's opening (the corners 61 and 291 are on the outer one)."""
 IBUG68_FEATURES = {
@@ -113,6 +117,11 @@ class SkinClassifierConfig:
     surface, and a fit whose mouth is less open than the photo's would paint the teeth onto the lips' texels, which
     completion fills instead. MediaPipe landmarks only; with BiSeNet, its mouth class leaves h. Off in ``paper``
     (its parser counts the mouth as face)."""
+    eye_opening: bool = True
+    """The openings between the lids (the white of the eye, the iris, the pink inner corner, the lower lid's wet rim)
+    are not face: they are not the skin's surface, and a fit whose lids sit a little off the photo's would paint
+    them onto the lids' texels as red, white or dark streaks, which completion fills instead. The lashes, on the
+    lid margins, stay. MediaPipe landmarks only; with BiSeNet, its eye classes leave h. Off in ``paper``."""
     occluders: OccluderConfig = OccluderConfig()
     """Thin, long, dark structures (a glasses frame, a strand of hair, a thin stripe of shade) and the tinted lenses
     a frame encloses are left out, enclosed by skin or not (deface/priors/occluders.py). MediaPipe landmarks
@@ -172,6 +181,16 @@ def mouth_opening_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndar
     mask = np.zeros(shape, np.uint8)
     if landmarks.shape[0] in (468, 478):
         cv2.fillPoly(mask, [np.round(landmarks[list(MEDIAPIPE_INNER_LIPS)]).astype(np.int32)], 1)
+    return mask.astype(bool)
+
+
+def eye_openings_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """[H, W] bool: the polygons of the two lid margins, the eyes' openings (empty when the eyes are closed and for
+    layouts other than MediaPipe's 468/478)."""
+    mask = np.zeros(shape, np.uint8)
+    if landmarks.shape[0] in (468, 478):
+        for contour in MEDIAPIPE_LID_MARGINS:
+            cv2.fillPoly(mask, [np.round(landmarks[list(contour)]).astype(np.int32)], 1)
     return mask.astype(bool)
 
 
@@ -316,6 +335,9 @@ class SkinColourClassifier:
         if cfg.mouth_opening and mediapipe:
             mouth = cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(1)).astype(bool)  # soft edge
             occluders = mouth if occluders is None else occluders | mouth
+        if cfg.eye_opening and mediapipe:  # not grown: the lashes on the margins are the person's
+            openings = eye_openings_mask(points, shape)
+            occluders = openings if occluders is None else occluders | openings
 
         size = max(3, int(round(cfg.smoothing * diagonal)) | 1)
         skin = np.where(region, skin, 0.0).astype(np.float32)
@@ -361,10 +383,11 @@ def load_face_region_classifier(
     if prefer not in ("bisenet", "skin"):
         raise ValueError(f"unknown face-region classifier {prefer!r}; choose 'bisenet' or 'skin'")
     if prefer == "bisenet":
-        from deface.priors.bisenet import FACE_CLASSES, MOUTH_CLASS, BiSeNetFaceParser, MissingWeightsError
+        from deface.priors.bisenet import EYE_CLASSES, FACE_CLASSES, MOUTH_CLASS, BiSeNetFaceParser, MissingWeightsError
 
-        mouth_out = (skin or SkinClassifierConfig()).mouth_opening
-        classes = tuple(c for c in FACE_CLASSES if not (mouth_out and c == MOUTH_CLASS))
+        config = skin or SkinClassifierConfig()
+        left_out = ((MOUTH_CLASS,) if config.mouth_opening else ()) + (EYE_CLASSES if config.eye_opening else ())
+        classes = tuple(c for c in FACE_CLASSES if c not in left_out)
         try:
             return (BiSeNetFaceParser.from_models_dir(models_dir, face_classes=classes),
                     "BiSeNet face parsing (79999_iter.pth)")
