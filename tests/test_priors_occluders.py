@@ -4,6 +4,8 @@ stays with the brow), a mole of the same darkness stays."""
 
 from __future__ import annotations
 
+import re
+
 import cv2
 import numpy as np
 import pytest
@@ -74,6 +76,33 @@ def test_a_thin_dark_ring_around_the_eyes_leaves_h_and_a_mole_as_dark_stays(phot
     assert off_features.sum() > 0.6 * ring.sum() and h[off_features].mean() < 0.2
     assert np.median(h[off_features]) == 0.0  # not half in: at half weight the fit paints a trace of the frame
     assert h[mole > 0].mean() > 0.8
+
+
+def test_the_fit_says_what_share_of_the_face_the_finder_left_out(photos):
+    """The fit's log says how much of the face the finder took (and what it leaves in): a drawn frame raises the
+    share by about its own area (the clean photo's hairline strands are found too); the classifier's h is the same
+    whether it is asked for what it found or not."""
+    from deface.fit.face_region import say_occluders
+    from deface.fit.log import FitLog
+
+    image, points = _face(photos)
+    coverage = cv2.dilate(_hull_mask(points, image.shape[:2]).astype(np.uint8), np.ones((15, 15), np.uint8))
+    classifier = SkinColourClassifier()
+    framed = image.copy()
+    frame = _draw_frame(framed, points) > 0
+    shares = []
+    for picture in (image, framed):
+        h, found = classifier.with_occluders(picture, coverage.astype(np.float32), points)
+        np.testing.assert_array_equal(h, classifier(picture, coverage.astype(np.float32), points))
+        log = FitLog(quiet=True)
+        say_occluders(found, coverage, log, 0)
+        assert len(log.notes) == 1 and "of the face; left out of h" in log.notes[0]
+        shares.append(float(re.search(r"cover ([0-9.]+) %", log.notes[0]).group(1)))
+    drawn = 100 * (frame & (coverage > 0)).sum() / (coverage > 0).sum()
+    assert shares[1] - shares[0] > 0.5 * drawn
+    log = FitLog(quiet=True)
+    say_occluders(None, coverage, log, 0)  # the finder did not look (off, or not MediaPipe's landmarks)
+    assert log.notes == []
 
 
 def test_a_strand_over_the_forehead_leaves_h(photos):

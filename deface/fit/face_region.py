@@ -10,7 +10,7 @@ from deface.fit.config import FitConfig
 from deface.fit.log import FitLog
 from deface.fit.state import PosedFace
 from deface.fit.target import FitTarget
-from deface.priors.face_region import load_face_region_classifier
+from deface.priors.face_region import SkinColourClassifier, load_face_region_classifier
 from deface.priors.occluders import HandConfig, hand_mask, reaches_in
 
 
@@ -24,9 +24,31 @@ def face_classifier(face: PosedFace, target: FitTarget, config: FitConfig, model
     for frame in range(target.num_frames):
         _, fragments = face.fragments(frame)
         image, points = target.frames_srgb[frame], target.landmarks[frame].points
-        h = np.asarray(classifier(image, fragments.mask.numpy(), points))
+        coverage = fragments.mask.numpy()
+        if isinstance(classifier, SkinColourClassifier):
+            h, occluders = classifier.with_occluders(image, coverage, points)
+            say_occluders(occluders, coverage, log, frame)
+        else:
+            h = classifier(image, coverage, points)
+        h = np.asarray(h)
         found.append(torch.as_tensor(without_hands(h, image, points, config.hands, log, frame), dtype=torch.float32))
     return tuple(found), note
+
+
+SAID_OCCLUDERS = 0.005
+"""The occluder finder's share of the face from which the fit says it (half a percent: a frame, a strand)."""
+
+
+def say_occluders(occluders: np.ndarray | None, coverage: np.ndarray, log: FitLog, frame: int) -> None:
+    """Say in ``log`` what share of the face (``coverage`` [H, W]) the occluder finder left out of h, and what it
+    leaves in (docs/occluders.md "Limits")."""
+    if occluders is None:
+        return
+    share = float((occluders & (coverage > 0.5)).sum() / max((coverage > 0.5).sum(), 1))
+    if share >= SAID_OCCLUDERS:
+        log.info(f"frame {frame}: thin dark structures (strands of hair, a glasses frame, thin stripes of shade) cover "
+                 f"{100 * share:.1f} % of the face; left out of h and filled. A frame's rim along a brow, a tinted "
+                 "lens it does not enclose and fingers without their hand stay (docs/occluders.md)")
 
 
 def without_hands(h: np.ndarray, image: np.ndarray, face: np.ndarray, config: HandConfig, log: FitLog,

@@ -286,6 +286,11 @@ class SkinColourClassifier:
 
     def __call__(self, image, coverage, landmarks=None, features=None) -> np.ndarray:
         """h [H, W] float32. ``features``: optional [H, W] mask of projected model features kept as face."""
+        return self.with_occluders(image, coverage, landmarks, features)[0]
+
+    def with_occluders(self, image, coverage, landmarks=None, features=None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(h, what the occluder finder left out of it [H, W] bool, None when it did not look): the fit says how
+        much of the face the second covers."""
         cfg = self.config
         srgb = np.clip(_as_numpy(image), 0.0, 1.0)
         if srgb.ndim != 3 or srgb.shape[-1] != 3:
@@ -331,7 +336,8 @@ class SkinColourClassifier:
         distance[partly] = clipped_chroma_distance(linear[partly], clipped[partly], mean, precision)
         reliable |= partly
         skin = 1.0 / (1.0 + np.exp((distance - cfg.threshold) / cfg.softness))
-        occluders = self._occluders(srgb, region, points, diagonal) if cfg.occluders.enabled and mediapipe else None
+        found = self._occluders(srgb, region, points, diagonal) if cfg.occluders.enabled and mediapipe else None
+        occluders = found
         if cfg.mouth_opening and mediapipe:
             mouth = cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(1)).astype(bool)  # soft edge
             occluders = mouth if occluders is None else occluders | mouth
@@ -358,7 +364,7 @@ class SkinColourClassifier:
         skin = cv2.GaussianBlur(skin.astype(np.float32), (0, 0), sigmaX=max(0.5, size / 3))
         if occluders is not None:  # and after the blur: a frame's pixels at half weight painted a trace of it
             skin = np.where(occluders, 0.0, skin)
-        return np.clip(np.where(region, skin, 0.0), 0.0, 1.0).astype(np.float32)
+        return np.clip(np.where(region, skin, 0.0), 0.0, 1.0).astype(np.float32), found
 
 
     def _occluders(self, srgb: np.ndarray, region: np.ndarray, points: np.ndarray, diagonal: float) -> np.ndarray:
