@@ -44,7 +44,8 @@ def say_occluders(occluders: np.ndarray | None, coverage: np.ndarray, log: FitLo
     leaves in (docs/occluders.md "Limits")."""
     if occluders is None:
         return
-    share = float((occluders & (coverage > 0.5)).sum() / max((coverage > 0.5).sum(), 1))
+    face = coverage > 0.5
+    share = float((occluders & face).sum() / max(face.sum(), 1))
     if share >= SAID_OCCLUDERS:
         log.info(f"frame {frame}: thin dark structures (strands of hair, a glasses frame, thin stripes of shade) cover "
                  f"{100 * share:.1f} % of the face; left out of h and filled. A frame's rim along a brow, a tinted "

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from deface.fit.log import FitLog
 from deface.io.images import LUMINANCE
 from deface.models.uvmap import rasterize_uv
 from deface.render.mesh import Textures
@@ -91,12 +92,12 @@ def filtered_chroma(textures: Textures, seen_map: np.ndarray, views: list[TexelV
 
 
 def pigment_gamut_textures(textures: Textures, seen_map: np.ndarray, config: PigmentGamutConfig,
-                           log) -> Textures:
+                           log: FitLog) -> Textures:
     """The maps with the diffuse map's hues held to the pigments' gamut (deface/texture/pigment_gamut.py); the share
     of seen texels that were outside it said in ``log``."""
     diffuse = textures.diffuse.detach().numpy()
     share = outside_share(diffuse, seen_map)
-    if share >= 0.0005:  # said from 0.1 % up
+    if share >= 0.0005:  # said from what prints as 0.1 % up
         log.info(f"{100 * share:.1f} % of the seen texels had a hue no skin, hair or lip pigment makes (a light's "
                  "colour left in the map): they took the skin's around them (pigment_gamut.enabled=false keeps them, "
                  "for blue, green or violet make-up)")

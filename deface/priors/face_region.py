@@ -178,19 +178,20 @@ def hair_zone_mask(landmarks: np.ndarray, shape: tuple[int, int], margin: int, r
 def mouth_opening_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """[H, W] bool: the polygon of the inner lip contour, the mouth's opening (empty when the mouth is closed and
     for layouts other than MediaPipe's 468/478)."""
-    mask = np.zeros(shape, np.uint8)
-    if landmarks.shape[0] in (468, 478):
-        cv2.fillPoly(mask, [np.round(landmarks[list(MEDIAPIPE_INNER_LIPS)]).astype(np.int32)], 1)
-    return mask.astype(bool)
+    return _openings(landmarks, shape, (MEDIAPIPE_INNER_LIPS,))
 
 
 def eye_openings_mask(landmarks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """[H, W] bool: the polygons of the two lid margins, the eyes' openings (empty when the eyes are closed and for
     layouts other than MediaPipe's 468/478)."""
+    return _openings(landmarks, shape, MEDIAPIPE_LID_MARGINS)
+
+
+def _openings(landmarks: np.ndarray, shape: tuple[int, int], contours: tuple[tuple[int, ...], ...]) -> np.ndarray:
+    """[H, W] bool: the filled polygons of MediaPipe's ``contours`` (index lists in order); empty for other layouts."""
     mask = np.zeros(shape, np.uint8)
     if landmarks.shape[0] in (468, 478):
-        for contour in MEDIAPIPE_LID_MARGINS:
-            cv2.fillPoly(mask, [np.round(landmarks[list(contour)]).astype(np.int32)], 1)
+        cv2.fillPoly(mask, [np.round(landmarks[list(contour)]).astype(np.int32) for contour in contours], 1)
     return mask.astype(bool)
 
 
@@ -337,13 +338,12 @@ class SkinColourClassifier:
         reliable |= partly
         skin = 1.0 / (1.0 + np.exp((distance - cfg.threshold) / cfg.softness))
         found = self._occluders(srgb, region, points, diagonal) if cfg.occluders.enabled and mediapipe else None
-        occluders = found
-        if cfg.mouth_opening and mediapipe:
-            mouth = cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(1)).astype(bool)  # soft edge
-            occluders = mouth if occluders is None else occluders | mouth
+        left_out = [] if found is None else [found]
+        if cfg.mouth_opening and mediapipe:  # grown by a pixel: the opening's soft edge
+            left_out.append(cv2.dilate(mouth_opening_mask(points, shape).astype(np.uint8), disk(1)).astype(bool))
         if cfg.eye_opening and mediapipe:  # not grown: the lashes on the margins are the person's
-            openings = eye_openings_mask(points, shape)
-            occluders = openings if occluders is None else occluders | openings
+            left_out.append(eye_openings_mask(points, shape))
+        occluders = np.logical_or.reduce(left_out) if left_out else None
 
         size = max(3, int(round(cfg.smoothing * diagonal)) | 1)
         skin = np.where(region, skin, 0.0).astype(np.float32)
